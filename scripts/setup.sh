@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# Create .venv with a torch/torchvision pair that imports together, then crafter-zoo itself.
+# A CPU torch beside PyPI's (CUDA) torchvision fails at import ("torchvision::nms does not
+# exist"), which breaks open_clip; so torch and torchvision are installed as one matched pair.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3}
+if [ ! -x .venv/bin/python ]; then
+  "$PY" -m venv .venv
+fi
+case "$(uname -m)" in
+  aarch64|arm64) TORCH="torch==2.9.1 torchvision==0.24.1" ;;
+  *) TORCH="torch==2.14.1 torchvision==0.29.1" ;;
+esac
+.venv/bin/python -m pip install -q --disable-pip-version-check $TORCH 2>&1 | grep -v "^WARNING: Location" || true
+.venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test]" 2>&1 | grep -v "^WARNING: Location" || true
+.venv/bin/python -c "import torch, torchvision, open_clip, lightning, jax, crafter, craftax, zoo" \
+  || { echo "setup.sh: the environment does not import; see the pip output above" >&2; exit 1; }
+echo "setup.sh: .venv ready (torch $(.venv/bin/python -c 'import torch; print(torch.__version__)'))"

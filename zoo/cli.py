@@ -1,0 +1,64 @@
+"""The `zoo` command: data, eval and export tools; fit|validate|test|predict go to LightningCLI.
+
+Subcommands live next to what they drive (``zoo/<part>/cli.py`` exposes ``register``), so
+this file only wires them. Lightning is imported only for the training verbs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+TRAIN_VERBS = ("fit", "validate", "test", "predict")
+
+# (module, function) pairs; each function adds its subcommands to the parser it is given.
+TOP_LEVEL = (
+    ("zoo.data.cli", "register"),
+    ("zoo.eval.cli", "register"),
+    ("zoo.captions.cli", "register"),
+    ("zoo.export_cli", "register"),
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="zoo",
+        description=(
+            "crafter-zoo: the CrafterDojo suite for Crafter. Generate expert data "
+            "(zoo data generate), score agents in Craftax-Classic or crafter (zoo eval), and "
+            "train models with LightningCLI (zoo fit --config configs/cvpt_smoke.yaml)."
+        ),
+        epilog="Training verbs: " + ", ".join(TRAIN_VERBS) + " (see `zoo fit --help`).",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for module, func in TOP_LEVEL:
+        try:
+            mod = importlib.import_module(module)
+        except ModuleNotFoundError as err:
+            if err.name != module:
+                raise
+            continue
+        getattr(mod, func)(sub)
+    for verb in TRAIN_VERBS:
+        sub.add_parser(verb, help=f"LightningCLI {verb} (--config configs/<model>.yaml)", add_help=False)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv and argv[0] in TRAIN_VERBS:
+        from lit_models.cli import run_lightning_cli
+
+        run_lightning_cli(argv)
+        return 0
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "handler", None):
+        parser.print_help()
+        return 0 if not argv else 2
+    return int(args.handler(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
