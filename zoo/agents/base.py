@@ -1,0 +1,40 @@
+"""What plays in an env: experts, trained policies and baselines all implement ``Agent``."""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from zoo.envs.base import Step
+from zoo.envs.constants import NUM_ACTIONS
+
+
+class Agent(Protocol):
+    """Acts for N envs at once; keeps per-env memory (plans, RNN/TrXL state) between calls."""
+
+    name: str
+
+    def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> None:
+        """Forget env i's memory where ``mask[i]`` (all if None); ``seeds[i]`` seeds its randomness."""
+        ...
+
+    def act(self, step: Step) -> np.ndarray:
+        """Return one action id per env, int array of shape (N,)."""
+        ...
+
+
+class RandomAgent:
+    """Uniform random actions; each env's stream depends only on its episode seed."""
+
+    name = "random"
+
+    def __init__(self, num_envs: int) -> None:
+        self._rngs = [np.random.default_rng(0) for _ in range(num_envs)]
+
+    def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> None:
+        for i in range(len(self._rngs)) if mask is None else np.flatnonzero(mask):
+            self._rngs[i] = np.random.default_rng(int(seeds[i]))
+
+    def act(self, step: Step) -> np.ndarray:
+        return np.array([rng.integers(NUM_ACTIONS) for rng in self._rngs], np.int32)
