@@ -8,6 +8,8 @@ the map as PLANT / RIPE_PLANT so both envs' maps mean the same.
 
 from __future__ import annotations
 
+import collections
+
 import numpy as np
 
 from zoo.envs.base import Step, check_actions, check_seeds
@@ -39,16 +41,51 @@ def _material_lookup(material_names: dict[int, str | None]) -> np.ndarray:
     return table
 
 
+class _InsertionOrderedSet(dict):
+    """A set that iterates in insertion order (a dict of keys to None)."""
+
+    def add(self, item) -> None:
+        self[item] = None
+
+    def remove(self, item) -> None:
+        del self[item]
+
+
 def _make_crafter_env(pixels: bool, max_steps: int):
+    """A crafter.Env whose episodes depend on the seed alone.
+
+    Two changes to crafter 1.8.3, neither of which changes the game's rules:
+    - crafter keeps each chunk's objects in a ``set``, which iterates in memory-address order,
+      and draws spawn/despawn randomness in that order, so the same seed and actions gave
+      different episodes in different processes (danijar/crafter#31, #36). Chunks here keep
+      insertion order.
+    - crafter's night-time render noise draws from the world's generator, so rendering or not
+      changed the game. The noise here has a generator of its own, seeded with the world.
+    """
     import crafter
 
     class _Crafter(crafter.Env):
-        """crafter.Env that can skip rendering when only the state is wanted."""
+        def __init__(self) -> None:
+            super().__init__(area=(64, 64), size=FRAME_SHAPE[:2], length=max_steps)
+            world, view = self._world, self._local_view
+            world_reset = world.reset
+
+            def reset(seed=None):
+                world_reset(seed)
+                world._chunks = collections.defaultdict(_InsertionOrderedSet)
+                view._noise_rng = np.random.RandomState(seed)
+
+            def noise(canvas, amount, stddev):
+                values = view._noise_rng.uniform(32, 127, canvas.shape[:2])[..., None]
+                mask = amount * view._vignette(canvas.shape, stddev)[..., None]
+                return (1 - mask) * canvas + mask * values
+
+            world.reset, view._noise = reset, noise
 
         def _obs(self):
             return super()._obs() if pixels else None
 
-    return _Crafter(area=(64, 64), size=FRAME_SHAPE[:2], length=max_steps)
+    return _Crafter()
 
 
 class CrafterEnv:

@@ -1,0 +1,133 @@
+"""``zoo eval``: play an agent for N episodes and write the Crafter evaluation report."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+import zoo.agents
+from zoo.agents import AGENT_NAMES, make_agent
+from zoo.envs import ENV_NAMES
+
+DESCRIPTION = """\
+Play an agent in Craftax-Classic or original crafter and score it the paper's way: Crafter
+Score and normalized Return as mean ± std over 5 chunks of the episodes (100 episodes = 5 x 20).
+Writes OUT/report.json, OUT/stats.jsonl (crafter's Recorder format), OUT/achievements.png and
+OUT/episode.gif. Episode j is seeded from (--seed, j), so --num-envs changes speed, not results.
+Frames are always rendered (the GIF and pixel policies need them), which costs state-only
+experts speed: crafter ~700 vs ~3,200 env-steps/s, Craftax ~2,400 vs ~5,900 on one CPU core.
+"""
+
+
+class UsageError(Exception):
+    """Bad arguments found after parsing; reported as ``zoo eval: error: ...`` with exit code 2."""
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def _non_negative_int(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
+def register(subparsers) -> None:
+    """Add ``zoo eval`` to the ``zoo`` command."""
+    p = subparsers.add_parser(
+        "eval",
+        help="score an agent: Crafter Score, Return, success rates, GIF",
+        description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--agent", choices=AGENT_NAMES, help="who plays (from zoo.agents.AGENT_NAMES)")
+    p.add_argument("--checkpoint", type=Path, help="checkpoint of a trained agent (e.g. ppo)")
+    p.add_argument("--env", choices=ENV_NAMES, required=True, help="game to play in")
+    p.add_argument("--episodes", type=_positive_int, default=100, help="episodes (default 100)")
+    p.add_argument("--seed", type=_non_negative_int, default=0, help="run seed (default 0)")
+    p.add_argument(
+        "--out", type=Path,
+        help="output directory (default runs/eval/<agent>-<env>-<UTC time>)",
+    )
+    p.add_argument(
+        "--num-envs", type=_positive_int, default=8, help="envs played at once (default 8)"
+    )
+    p.add_argument(
+        "--max-steps", type=_positive_int, default=10_000, help="episode step limit (default 10000)"
+    )
+    p.add_argument("--no-gif", action="store_true", help="skip episode.gif")
+    p.add_argument("--overwrite", action="store_true", help="replace a report already in --out")
+    p.set_defaults(handler=run_eval)
+
+
+def _check_out(out: Path, overwrite: bool) -> None:
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out} is an existing file; give a directory")
+    if (out / "report.json").exists() and not overwrite:
+        raise UsageError(f"--out {out} already holds report.json; pass --overwrite to replace it")
+
+
+def _build_agent(args: argparse.Namespace, num_envs: int):
+    """The agent named by --agent, or, with only --checkpoint, ``zoo.agents.load_checkpoint_agent``
+    when the model zoo provides one (trained policies such as C-VPT plug in there)."""
+    if args.checkpoint is not None and not args.checkpoint.exists():
+        raise UsageError(f"--checkpoint {args.checkpoint} does not exist")
+    if args.agent is None:
+        loader = getattr(zoo.agents, "load_checkpoint_agent", None)
+        if args.checkpoint is None or loader is None:
+            raise UsageError(f"--agent is required (one of {', '.join(AGENT_NAMES)})")
+        return loader(str(args.checkpoint), num_envs)
+    checkpoint = None if args.checkpoint is None else str(args.checkpoint)
+    try:
+        return make_agent(args.agent, num_envs, checkpoint)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    except ImportError as err:
+        raise UsageError(f"agent {args.agent!r} is not available in this install: {err}") from None
+
+
+def run_eval(args: argparse.Namespace) -> int:
+    from zoo.envs import make_env
+    from zoo.eval.report import format_table, write_report
+    from zoo.eval.rollout import evaluate
+
+    num_envs = min(args.num_envs, args.episodes)
+    now = datetime.now(timezone.utc)
+    if args.out is None:
+        who = args.agent or "checkpoint"
+        args.out = Path("runs", "eval", f"{who}-{args.env}-{now:%Y%m%d-%H%M%S}")
+    try:
+        _check_out(args.out, args.overwrite)
+        agent = _build_agent(args, num_envs)
+    except UsageError as err:
+        print(f"zoo eval: error: {err}", file=sys.stderr)
+        return 2
+    started_at = now.isoformat(timespec="seconds")
+    clock = time.perf_counter()
+    env = make_env(args.env, num_envs, pixels=True, max_steps=args.max_steps)
+    results = evaluate(
+        agent, env, args.episodes, args.seed, record_gif_episode=None if args.no_gif else 0
+    )
+    meta = {
+        "env": args.env,
+        "agent": args.agent or getattr(agent, "name", "checkpoint"),
+        "checkpoint": None if args.checkpoint is None else str(args.checkpoint),
+        "seed": args.seed,
+        "num_envs": num_envs,
+        "max_steps": args.max_steps,
+        "started_at": started_at,
+        "finished_at": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "wall_seconds": round(time.perf_counter() - clock, 2),
+    }
+    report = write_report(results, args.out, meta)
+    print(format_table(report))
+    print(f"wrote {', '.join(str(args.out / name) for name in report['files'])}")
+    return 0
