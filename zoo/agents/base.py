@@ -14,6 +14,7 @@ class Agent(Protocol):
     """Acts for N envs at once; keeps per-env memory (plans, RNN/TrXL state) between calls."""
 
     name: str
+    needs_pixels: bool  # False for agents that read only the state (the env may skip rendering)
 
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> None:
         """Forget env i's memory where ``mask[i]`` (all if None); ``seeds[i]`` seeds its randomness."""
@@ -28,6 +29,7 @@ class RandomAgent:
     """Uniform random actions; each env's stream depends only on its episode seed."""
 
     name = "random"
+    needs_pixels = False
 
     def __init__(self, num_envs: int) -> None:
         self._rngs = [np.random.default_rng(0) for _ in range(num_envs)]

@@ -30,6 +30,7 @@ class PPOExpert:
     """Acts for N Craftax envs from a PPO checkpoint; ``greedy`` takes the most likely action."""
 
     name = "ppo"
+    needs_pixels = False  # reads the Craftax state (symbolic observation)
 
     def __init__(
         self, network: ActorCriticRNN, params, num_envs: int, greedy: bool = False
