@@ -1,0 +1,120 @@
+"""CrafterPlay -> CrafterCaption round trip on a tiny random-agent set (3 crafter episodes)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import webdataset as wds
+
+from zoo.captions.dataset import (
+    caption_dataset,
+    decode_caption_sample,
+    heldout_count,
+    list_caption_shards,
+    write_caption_dataset,
+)
+from zoo.captions.vocabulary import load_vocabulary
+from zoo.cli import main
+from zoo.data.reader import iter_episodes, list_shards
+
+
+@pytest.fixture(scope="module")
+def play(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("play")
+    argv = ["data", "generate", "--expert", "random", "--env", "crafter", "--episodes", "3",
+            "--max-steps", "60", "--seed", "0", "--out", str(out), "--no-progress"]
+    assert main(argv) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def captioned(play, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("cap")
+    argv = ["data", "caption", "--src", str(play), "--out", str(out), "--seed", "0",
+            "--per-shard", "3"]
+    assert main(argv) == 0
+    return out
+
+
+def read_split(root: Path, split: str) -> list[dict]:
+    urls = list_caption_shards(root, split)
+    dataset = wds.WebDataset(urls, shardshuffle=False, empty_check=False)
+    return list(dataset.map(decode_caption_sample))
+
+
+def test_samples_are_source_clips_with_their_caption(play, captioned):
+    episodes = {e["meta"]["episode"]: e for e in iter_episodes(list_shards(play))}
+    vocab = load_vocabulary()
+    samples = read_split(captioned, "train") + read_split(captioned, "test")
+    assert samples
+    for s in samples:
+        assert s["frames"].shape == (6, 144, 144, 3) and s["frames"].dtype == np.uint8
+        source = episodes[s["episode"]]
+        t = s["step"]
+        assert np.array_equal(s["frames"], source["frames"][t - 4 : t + 2])
+        assert s["seed"] == source["meta"]["seed"]
+        caption = vocab.captions[s["caption_id"]]
+        assert (caption.text, caption.rule) == (s["caption"], s["rule"])
+        assert caption.category == s["category"]
+
+
+def test_manifest_counts_and_split(captioned):
+    manifest = json.loads((captioned / "manifest.json").read_text())
+    train, test = manifest["splits"]["train"], manifest["splits"]["test"]
+    assert test["samples"] > 0 and train["samples"] > 0
+    assert (train["episodes"], test["episodes"]) == (2, 1)  # 1000 requested > 3: 5%, at least one
+    assert len(manifest["heldout"]) == 1 and manifest["heldout"][0] in manifest["episodes"]
+    for split in (train, test):
+        after = [n for n in split["counts_after"]["rules"].values() if n]
+        assert max(after) - min(after) <= 1  # uniform over the rules that fired
+        assert sum(split["counts_after"]["captions"].values()) == split["samples"]
+        assert sum(s["samples"] for s in split["shards"]) == split["samples"]
+        fired = {r for r, n in split["counts_before"]["rules"].items() if n}
+        assert {r for r, n in split["counts_after"]["rules"].items() if n} == fired
+    held = set(manifest["heldout"])
+    assert all(s["episode"] in held for s in read_split(captioned, "test"))
+    assert not any(s["episode"] in held for s in read_split(captioned, "train"))
+
+
+def _shard_bytes(root: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(root.glob("*.tar"))}
+
+
+def test_same_input_and_seed_give_identical_shards(play, captioned, tmp_path):
+    caption_dataset(play, tmp_path, seed=0, per_shard=3)
+    assert _shard_bytes(tmp_path) == _shard_bytes(captioned)
+
+
+def test_resume_rewrites_only_missing_shards(play, captioned, tmp_path):
+    caption_dataset(play, tmp_path, seed=0, per_shard=3)
+    first = sorted(tmp_path.glob("*.tar"))[0]
+    first.unlink()
+    caption_dataset(play, tmp_path, seed=0, per_shard=3)
+    assert _shard_bytes(tmp_path) == _shard_bytes(captioned)
+    assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_resuming_a_different_run_is_refused(play, tmp_path):
+    caption_dataset(play, tmp_path, seed=0, per_shard=3)
+    with pytest.raises(ValueError, match="different caption run.*per_shard"):
+        caption_dataset(play, tmp_path, seed=0, per_shard=4)
+
+
+def test_heldout_count_is_never_empty():
+    assert heldout_count(20_000, 1000, 0.05) == 1000
+    assert heldout_count(3, 1000, 0.05) == 1
+    assert heldout_count(100, 1000, 0.05) == 5
+    assert heldout_count(3, 2, 0.05) == 2
+    with pytest.raises(ValueError, match="at least 2 episodes"):
+        heldout_count(1, 1000, 0.05)
+    with pytest.raises(ValueError, match="must be >= 1"):
+        heldout_count(10, 0, 0.05)
+
+
+def test_single_episode_input_is_an_error(play, tmp_path):
+    episode = next(iter_episodes(list_shards(play)))
+    with pytest.raises(ValueError, match="at least 2 episodes"):
+        write_caption_dataset(lambda: [episode], tmp_path)

@@ -1,0 +1,137 @@
+"""Noop detection, runs and the read-time filter (the paper's 'runs < 20 removed')."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from zoo.data.noop import filter_noops, noop_counts, noop_flags, noop_runs
+from zoo.envs.constants import Action, Block, Item, Mob
+from zoo.envs.schema import empty_state
+
+
+def _chunk(noop: np.ndarray, runs: np.ndarray | None = None) -> dict:
+    n = len(noop)
+    state = empty_state(n)
+    state["timestep"][:] = np.arange(n)
+    return {
+        "frames": np.zeros((n, 2, 2, 3), np.uint8),
+        "actions": np.arange(n, dtype=np.int64),
+        "rewards": np.zeros(n, np.float32),
+        "noop": noop,
+        "noop_run": noop_runs(noop) if runs is None else runs,
+        "state": state,
+        "meta": {"episode": 0},
+    }
+
+
+def test_noop_runs_hand_computed():
+    noop = np.array([0, 1, 1, 0, 1, 0, 0, 1, 1, 1], bool)
+    assert noop_runs(noop).tolist() == [0, 2, 2, 0, 1, 0, 0, 3, 3, 3]
+    assert noop_runs(np.zeros(0, bool)).tolist() == []
+
+
+def test_filter_removes_run_of_19_keeps_run_of_20():
+    noop = np.array([False] * 3 + [True] * 19 + [False] * 2 + [True] * 20 + [False], bool)
+    out = filter_noops(_chunk(noop), min_run=20)
+    expect = [0, 1, 2, 22, 23, *range(24, 44), 44]
+    assert out["step_index"].tolist() == expect
+    assert out["actions"].tolist() == expect
+    assert out["state"]["timestep"].tolist() == expect
+    # the only gap is the removed run of 19, just before step 22
+    assert np.flatnonzero(out["cut"]).tolist() == [3]
+    assert out["noop"].sum() == 20 and out["meta"] == {"episode": 0}
+
+
+def test_filter_cut_flag_at_chunk_start():
+    noop = np.array([True] * 5 + [False] * 3, bool)
+    out = filter_noops(_chunk(noop))
+    assert out["step_index"].tolist() == [5, 6, 7]
+    assert out["cut"].tolist() == [True, False, False]
+
+
+def test_run_across_chunk_boundary_uses_episode_length():
+    # a run of 25 noops split 10 | 15 over two chunks must be kept in both
+    noop = np.array([False] * 6 + [True] * 25 + [False] * 5, bool)
+    runs = noop_runs(noop)
+    first, second = slice(0, 16), slice(16, 36)
+    a = filter_noops(_chunk(noop[first], runs[first]))
+    b = filter_noops(_chunk(noop[second], runs[second]))
+    assert len(a["actions"]) == 16 and len(b["actions"]) == 20
+    assert not a["cut"].any() and not b["cut"].any()
+    # computed per chunk instead, both pieces would be (wrongly) dropped
+    assert len(filter_noops(_chunk(noop[first]))["actions"]) == 6
+
+
+def test_noop_counts_exclude_final_observation():
+    noop = np.array([True] * 3 + [False] + [True] * 20 + [False], bool)
+    actions = np.array([0] * 24 + [-1])
+    counts = noop_counts(noop, noop_runs(noop), actions, min_run=20)
+    assert counts == {"steps": 24, "noop_steps": 23, "kept_steps": 21, "kept_noop_steps": 20}
+
+
+def _pair(n: int):
+    before = empty_state(n)
+    before["player_pos"][:] = (10, 10)
+    before["player_dir"][:] = int(Action.MOVE_RIGHT)  # facing (10, 11)
+    before["map"][:] = int(Block.GRASS)
+    before["player_vitals"][:] = (9, 5, 5, 9)
+    after = {k: v.copy() for k, v in before.items()}
+    return before, after
+
+
+def test_noop_flags_on_constructed_states():
+    cases = {}
+    before, after = _pair(9)
+    cases[0] = (Action.NOOP, True)
+    cases[1] = (Action.DO, True)  # facing grass, nothing changes
+    cases[2] = (Action.DO, False)
+    after["inventory"][2, Item.WOOD] = 1  # collected something
+    cases[3] = (Action.DO, False)
+    before["mob_map"][3, 10, 11] = int(Mob.ZOMBIE)  # hits a zombie
+    cases[4] = (Action.PLACE_TABLE, True)  # inventory unchanged: nothing placed
+    cases[5] = (Action.MOVE_LEFT, False)
+    after["player_dir"][5] = int(Action.MOVE_LEFT)  # turned
+    cases[6] = (Action.MOVE_RIGHT, True)  # blocked, already facing right
+    cases[7] = (Action.MOVE_UP, True)
+    before["player_sleeping"][7] = True  # any step while asleep
+    cases[8] = (Action.DO, False)
+    after["player_vitals"][8, 2] = 6  # drank water
+    actions = np.array([int(cases[i][0]) for i in range(9)])
+    expected = [cases[i][1] for i in range(9)]
+    assert noop_flags(actions, before, after).tolist() == expected
+
+
+def test_final_observation_is_not_a_noop():
+    before, after = _pair(1)
+    assert noop_flags(np.array([-1]), before, after).tolist() == [False]
+
+
+def test_noop_flags_on_real_rollout(crafter_env):
+    env = crafter_env
+    step = env.reset(np.array([5, 6]))
+    # env 0 idles; env 1 walks until it actually moves
+    moved = False
+    for action in [Action.MOVE_LEFT, Action.MOVE_RIGHT, Action.MOVE_UP, Action.MOVE_DOWN] * 2:
+        after = env.step(np.array([Action.NOOP, action]))
+        flags = noop_flags(np.array([Action.NOOP, action]), step.state, after.state)
+        assert flags[0]
+        if (after.state["player_pos"][1] != step.state["player_pos"][1]).any():
+            assert not flags[1]
+            moved = True
+            break
+        step = after
+    assert moved
+
+
+def test_filter_drops_sleeping_steps_unless_asked_to_keep_them():
+    """Sleep is one long noop run; its labels mean nothing (the env ignores actions asleep)."""
+    noop = np.array([False] * 2 + [True] * 30 + [False] * 3, bool)
+    chunk = _chunk(noop)
+    chunk["state"]["player_sleeping"][2:32] = True
+    out = filter_noops(chunk)
+    assert out["step_index"].tolist() == [0, 1, 32, 33, 34]
+    assert out["cut"].tolist() == [False, False, True, False, False]
+    kept = filter_noops(chunk, drop_sleeping=False)
+    assert len(kept["step_index"]) == len(noop)
+    counts = noop_counts(noop, noop_runs(noop), np.zeros(len(noop)), 20, chunk["state"]["player_sleeping"])
+    assert counts["kept_steps"] == 5 and counts["kept_noop_steps"] == 0

@@ -1,0 +1,119 @@
+"""`zoo data generate|info` (and `zoo data caption` when zoo.captions provides it)."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+from zoo.agents import AGENT_NAMES
+from zoo.envs import ENV_NAMES
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def _out_dir(text: str) -> Path:
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} exists and is not a folder")
+    return path
+
+
+def _data_dir(text: str) -> Path:
+    path = Path(text)
+    if not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is not a folder")
+    return path
+
+
+def register(subparsers) -> None:
+    data = subparsers.add_parser("data", help="CrafterPlay datasets: generate, info")
+    data.set_defaults(handler=lambda args: data.print_help() or 2)
+    data_sub = data.add_subparsers(dest="data_command", metavar="DATA_COMMAND")
+
+    gen = data_sub.add_parser(
+        "generate",
+        help="play an expert and write CrafterPlay shards (resumable, deterministic)",
+        description="Write DIR/crafterplay-NNNNNN.tar and DIR/manifest.json. Rerun the same "
+        "command after an interruption to finish the dataset.",
+    )
+    gen.add_argument("--expert", required=True, choices=AGENT_NAMES)
+    gen.add_argument("--checkpoint", help="expert checkpoint (needed by --expert ppo)")
+    gen.add_argument("--episodes", required=True, type=_positive_int)
+    gen.add_argument("--seed", required=True, type=int)
+    gen.add_argument("--out", required=True, type=_out_dir, help="dataset folder")
+    gen.add_argument("--workers", type=_positive_int, default=1, help="shard processes")
+    gen.add_argument("--env", choices=ENV_NAMES, default="craftax")
+    gen.add_argument("--episodes-per-shard", type=_positive_int, default=16)
+    gen.add_argument("--chunk-length", type=_positive_int, default=256, help="steps per sample")
+    gen.add_argument("--max-steps", type=_positive_int, default=10_000, help="episode step limit")
+    gen.add_argument("--num-envs", type=_positive_int, default=8, help="episodes played at once")
+    gen.add_argument("--no-progress", action="store_true", help="no progress bar")
+    gen.set_defaults(handler=_generate, _parser=gen)
+
+    info = data_sub.add_parser("info", help="counts, noop ratios, unlock rates; verify sha256")
+    info.add_argument("dir", type=_data_dir, help="dataset folder")
+    info.add_argument("--skip-corrupt", action="store_true",
+                      help="report shards failing their checksum and summarise the rest (exit 0)")
+    info.add_argument("--json", action="store_true", help="print JSON")
+    info.set_defaults(handler=_info)
+
+    if importlib.util.find_spec("zoo.captions.cli") is not None:
+        importlib.import_module("zoo.captions.cli").register_data_commands(data_sub)
+
+
+def _generate(args) -> int:
+    from zoo.data.generate import GenerationConfig, generate
+    from zoo.data.manifest import DatasetMismatchError
+
+    checkpoint = None
+    if args.checkpoint is not None:
+        if not Path(args.checkpoint).exists():
+            args._parser.error(f"--checkpoint {args.checkpoint} does not exist")
+        checkpoint = str(Path(args.checkpoint).resolve())
+    elif args.expert == "ppo":
+        args._parser.error("--expert ppo needs --checkpoint PATH")
+    config = GenerationConfig(
+        expert=args.expert, checkpoint=checkpoint, episodes=args.episodes, seed=args.seed,
+        env=args.env, episodes_per_shard=args.episodes_per_shard,
+        chunk_length=args.chunk_length, max_steps=args.max_steps,
+    )
+    try:
+        manifest = generate(config, args.out, args.workers, args.num_envs, not args.no_progress)
+    except DatasetMismatchError as err:
+        print(f"zoo data generate: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted; rerun the same command to finish the dataset", file=sys.stderr)
+        return 130
+    steps = sum(e["steps"] for e in manifest["shards"])
+    shards = len(manifest["shards"])
+    print(f"{args.out}: {shards} shards, {config.episodes} episodes, {steps} steps")
+    return 0
+
+
+def _info(args) -> int:
+    from zoo.data.info import dataset_info, format_info
+
+    try:
+        info = dataset_info(args.dir, skip_corrupt=args.skip_corrupt)
+    except (FileNotFoundError, ValueError) as err:
+        print(f"zoo data info: {err}", file=sys.stderr)
+        return 2
+    print(json.dumps(info, indent=1) if args.json else format_info(info))
+    if not info["ok"]:
+        for bad in info["bad_shards"]:
+            print(f"zoo data info: checksum failed: {bad['file']} ({bad['why']})", file=sys.stderr)
+        return 1
+    return 0

@@ -1,0 +1,338 @@
+"""CrafterPlay generation: an expert plays batched envs; episodes become WebDataset shards.
+
+Shard i holds episodes [i*E, (i+1)*E) and episode j is seeded from (seed, j) alone, so a
+shard's bytes depend only on (seed, i) and the generation arguments: never on --workers or
+--num-envs. Finished shards are verified by sha256 against the manifest, so a rerun of a
+killed command skips them and redoes the rest.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import queue
+import shutil
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from zoo.data.codec import FrameCodec
+from zoo.data.manifest import (
+    check_same_config,
+    load_manifest,
+    new_manifest,
+    package_versions,
+    save_manifest,
+)
+from zoo.data.noop import noop_counts, noop_flags, noop_runs
+from zoo.data.shards import (
+    SHARD_PATTERN,
+    ChunkEncoder,
+    EpisodeRecorder,
+    assemble_shard,
+    sha256_file,
+)
+from zoo.envs.base import Step
+from zoo.envs.constants import ACHIEVEMENT_NAMES
+from zoo.envs.schema import index_state
+
+ProgressFn = Callable[[int, int], None]  # (episodes finished, frames recorded) since last call
+
+
+@dataclass(frozen=True)
+class GenerationConfig:
+    """Everything that decides a dataset's content (stored in the manifest as ``config``).
+
+    Args:
+        expert: agent name for ``zoo.agents.make_agent`` ("scripted", "ppo", "random").
+        checkpoint: the expert's checkpoint (PPO), None otherwise.
+        episodes: episodes in the dataset.
+        seed: dataset seed; episode j is seeded from (seed, j).
+        env: "craftax" or "crafter".
+        episodes_per_shard: episodes per tar shard.
+        chunk_length: steps per WebDataset sample.
+        max_steps: episode step limit.
+        min_noop_run: filter threshold used for the noop statistics in the manifest.
+        zstd_level: zstd level for frames and arrays.
+        zstd_window_log: zstd window (log2 bytes).
+    """
+
+    expert: str
+    episodes: int
+    seed: int
+    env: str = "craftax"
+    checkpoint: str | None = None
+    episodes_per_shard: int = 16
+    chunk_length: int = 256
+    max_steps: int = 10_000
+    min_noop_run: int = 20
+    zstd_level: int = 2
+    zstd_window_log: int = 25
+
+    @property
+    def num_shards(self) -> int:
+        return -(-self.episodes // self.episodes_per_shard)
+
+    def shard_episodes(self, index: int) -> range:
+        start = index * self.episodes_per_shard
+        return range(start, min(start + self.episodes_per_shard, self.episodes))
+
+    @property
+    def codec(self) -> FrameCodec:
+        return FrameCodec(self.zstd_level, self.zstd_window_log)
+
+
+def episode_seed(seed: int, episode: int) -> int:
+    """Seed of episode ``episode`` (for env and agent), a function of (seed, episode) only."""
+    return int(np.random.SeedSequence([seed, episode]).generate_state(1, np.uint32)[0])
+
+
+class ShardGenerator:
+    """Holds one env batch and one agent (built once per process) and writes shards.
+
+    Args:
+        config: the dataset's generation arguments.
+        num_envs: episodes played at once (does not change the data).
+    """
+
+    def __init__(self, config: GenerationConfig, num_envs: int) -> None:
+        from zoo.agents import make_agent
+        from zoo.envs import make_env
+
+        self.config = config
+        self.num_envs = max(1, min(num_envs, config.episodes_per_shard, config.episodes))
+        self.env = make_env(config.env, self.num_envs, pixels=True, max_steps=config.max_steps)
+        self.agent = make_agent(config.expert, self.num_envs, config.checkpoint)
+        self.versions = package_versions()
+
+    def run(self, index: int, out: Path, progress: ProgressFn | None = None) -> dict:
+        """Play shard ``index``'s episodes, write the shard, return its manifest entry."""
+        cfg = self.config
+        workdir = Path(out) / f".work-{index:06d}-{os.getpid()}"
+        shutil.rmtree(workdir, ignore_errors=True)
+        workdir.mkdir(parents=True)
+        episodes = iter(cfg.shard_episodes(index))
+        summaries: dict[int, dict] = {}
+        meta = {"env": cfg.env, "expert": cfg.expert}
+        recorders: list[EpisodeRecorder | None] = [None] * self.num_envs
+        seeds = np.zeros(self.num_envs, np.int64)
+
+        with ChunkEncoder(max_pending=self.num_envs + 1) as encoder:
+
+            def start(slot: int) -> bool:
+                episode = next(episodes, None)
+                if episode is None:
+                    recorders[slot] = None
+                    return False
+                seeds[slot] = episode_seed(cfg.seed, episode)
+                recorders[slot] = EpisodeRecorder(
+                    episode, int(seeds[slot]), workdir, cfg.chunk_length, meta, encoder, cfg.codec
+                )
+                return True
+
+            for slot in range(self.num_envs):
+                start(slot)
+            step = self.env.reset(seeds)
+            self.agent.reset(seeds)
+            self._observe(step, recorders, np.ones(self.num_envs, bool))
+            frames = 0
+            while any(rec is not None for rec in recorders):
+                actions = np.asarray(self.agent.act(step))
+                after = self.env.step(actions)
+                noop = noop_flags(actions, step.state, after.state)
+                restart = np.zeros(self.num_envs, bool)
+                for slot, rec in enumerate(recorders):
+                    if rec is None:
+                        continue
+                    rec.act(int(actions[slot]), float(after.reward[slot]), bool(noop[slot]))
+                    rec.observe(after.frames[slot], index_state(after.state, slot))
+                    frames += 1
+                    if after.done[slot]:
+                        summaries[rec.episode] = self._summary(rec)
+                        if progress:
+                            progress(1, frames)
+                            frames = 0
+                        restart[slot] = start(slot)
+                step = after
+                if restart.any():
+                    fresh = self.env.reset(seeds, mask=restart)
+                    self.agent.reset(seeds, mask=restart)
+                    done = after.done & ~restart
+                    step = Step(fresh.frames, fresh.state, after.reward, done, fresh.raw)
+                    self._observe(step, recorders, restart)
+                if progress and frames >= 1024:
+                    progress(0, frames)
+                    frames = 0
+            for summary in summaries.values():
+                summary.pop("written").result()  # raises if writing a fragment failed
+        if progress and frames:
+            progress(0, frames)
+        order = sorted(summaries)
+        path = Path(out) / SHARD_PATTERN.format(index=index)
+        sha = assemble_shard([workdir / f"e{e:07d}.tar" for e in order], path)
+        shutil.rmtree(workdir, ignore_errors=True)
+        return self._entry(index, path, sha, [summaries[e] for e in order])
+
+    @staticmethod
+    def _observe(step: Step, recorders: list, mask: np.ndarray) -> None:
+        for slot in np.flatnonzero(mask):
+            if recorders[slot] is not None:
+                recorders[slot].observe(step.frames[slot], index_state(step.state, slot))
+
+    def _summary(self, rec: EpisodeRecorder) -> dict:
+        """Finish the episode and keep what the manifest reports about it."""
+        written = rec.finish()
+        noop = np.asarray(rec.noop, bool)
+        actions = np.asarray(rec.actions)
+        counts = noop_counts(
+            noop, noop_runs(noop), actions, self.config.min_noop_run, np.asarray(rec.sleeping)
+        )
+        return {
+            "episode": rec.episode, "seed": rec.seed, "length": len(rec.actions), "noop": counts,
+            "written": written,
+            "achievements": rec.final_state["achievements"].astype(bool),
+            "return": float(np.sum(rec.rewards)),
+        }
+
+    def _entry(self, index: int, path: Path, sha: str, episodes: list[dict]) -> dict:
+        cfg = self.config
+        noop = {k: sum(e["noop"][k] for e in episodes) for k in episodes[0]["noop"]}
+        noop["ratio_before"] = noop["noop_steps"] / max(noop["steps"], 1)
+        noop["ratio_after"] = noop["kept_noop_steps"] / max(noop["kept_steps"], 1)
+        noop["min_run"] = cfg.min_noop_run
+        unlocks = np.sum([e["achievements"] for e in episodes], axis=0)
+        return {
+            "file": path.name,
+            "index": index,
+            "sha256": sha,
+            "bytes": path.stat().st_size,
+            "episodes": len(episodes),
+            "first_episode": episodes[0]["episode"],
+            "episode_seeds": [e["seed"] for e in episodes],
+            "episode_lengths": [e["length"] for e in episodes],
+            "episode_returns": [e["return"] for e in episodes],
+            "steps": sum(e["length"] for e in episodes),
+            "seed": cfg.seed,
+            "expert": cfg.expert,
+            "env": cfg.env,
+            "chunk_length": cfg.chunk_length,
+            "versions": self.versions,
+            "noop": noop,
+            "achievement_unlocks": dict(zip(ACHIEVEMENT_NAMES, map(int, unlocks))),
+        }
+
+
+# --- running many shards -------------------------------------------------------------
+
+_worker: ShardGenerator | None = None
+_worker_progress = None
+
+
+def _init_worker(config: GenerationConfig, num_envs: int, progress_queue) -> None:
+    global _worker, _worker_progress
+    _worker = ShardGenerator(config, num_envs)
+    _worker_progress = progress_queue
+
+
+def _run_in_worker(index: int, out: str) -> dict:
+    return _worker.run(index, Path(out), lambda e, f: _worker_progress.put((e, f)))
+
+
+def _complete_shards(out: Path, manifest: dict) -> list[dict]:
+    """Manifest entries whose file exists and matches its sha256."""
+    return [
+        e for e in manifest["shards"]
+        if (out / e["file"]).exists() and sha256_file(out / e["file"]) == e["sha256"]
+    ]
+
+
+def _remove_leftovers(out: Path) -> None:
+    """Temp shards and work folders of killed runs (never complete data)."""
+    for tmp in out.glob("crafterplay-*.tar.tmp-*"):
+        tmp.unlink()
+    for work in out.glob(".work-*"):
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def generate(
+    config: GenerationConfig,
+    out: str | Path,
+    workers: int = 1,
+    num_envs: int = 8,
+    progress: bool = True,
+    after_shard: Callable[[dict], None] | None = None,
+    generator: ShardGenerator | None = None,
+) -> dict:
+    """Write (or finish) the dataset ``config`` in ``out``; returns the final manifest.
+
+    ``after_shard`` is called with each new manifest entry once it is saved. ``generator``
+    reuses an already built env and agent (JAX compiles once) for in-process runs.
+    """
+    if generator is not None and generator.config != config:
+        raise ValueError("generator was built for another GenerationConfig")
+    from tqdm import tqdm
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    stored = asdict(config)
+    manifest = load_manifest(out)
+    if manifest is None:
+        manifest = new_manifest(stored)
+    check_same_config(manifest, stored, out)
+    manifest["shards"] = _complete_shards(out, manifest)
+    _remove_leftovers(out)
+    save_manifest(out, manifest)
+    done = {e["index"] for e in manifest["shards"]}
+    todo = [i for i in range(config.num_shards) if i not in done]
+
+    bar = tqdm(
+        total=config.episodes, initial=sum(e["episodes"] for e in manifest["shards"]),
+        unit="ep", desc=f"crafterplay {out.name}", disable=not progress, dynamic_ncols=True,
+    )
+    frames_done = 0
+
+    def advance(episodes: int, frames: int) -> None:
+        nonlocal frames_done
+        frames_done += frames
+        bar.update(episodes)
+        elapsed = bar.format_dict["elapsed"] or 1e-9
+        bar.set_postfix(frames=frames_done, fps=f"{frames_done / elapsed:.0f}", refresh=False)
+
+    def record(entry: dict) -> None:
+        manifest["shards"].append(entry)
+        save_manifest(out, manifest)
+        if after_shard:
+            after_shard(entry)
+
+    try:
+        if workers <= 1 or len(todo) <= 1:
+            if generator is None and todo:
+                generator = ShardGenerator(config, num_envs)
+            for index in todo:
+                record(generator.run(index, out, advance))
+        else:
+            _run_pool(config, out, todo, workers, num_envs, advance, record)
+    finally:
+        bar.close()
+    return manifest
+
+
+def _run_pool(config, out, todo, workers, num_envs, advance, record) -> None:
+    """Shards in ``workers`` spawned processes (JAX is not fork-safe)."""
+    ctx = multiprocessing.get_context("spawn")
+    progress_queue = ctx.Queue()
+    init_args = (config, num_envs, progress_queue)
+    with ctx.Pool(min(workers, len(todo)), _init_worker, init_args) as pool:
+        pending = [pool.apply_async(_run_in_worker, (i, str(out))) for i in todo]
+        while pending:
+            try:
+                advance(*progress_queue.get(timeout=0.2))
+            except queue.Empty:
+                pass
+            for result in [r for r in pending if r.ready()]:
+                pending.remove(result)
+                record(result.get())
+        while not progress_queue.empty():
+            advance(*progress_queue.get())

@@ -1,0 +1,79 @@
+"""manifest.json: what a CrafterPlay folder holds and how it was made.
+
+It records the generation arguments once (``config``) and one entry per complete shard
+(file, sha256, episodes, steps, seeds, versions, noop and achievement statistics). It is
+rewritten atomically after every shard, so a killed run leaves a manifest that lists
+exactly the shards that were finished and verified.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from importlib import metadata
+from pathlib import Path
+
+MANIFEST = "manifest.json"
+FORMAT = "crafterplay"
+FORMAT_VERSION = 1
+VERSIONED_PACKAGES = ("crafter-zoo", "crafter", "craftax", "jax", "numpy", "zstandard")
+
+
+class DatasetMismatchError(RuntimeError):
+    """A folder already holds CrafterPlay data made with other generation arguments."""
+
+
+def package_versions() -> dict[str, str | None]:
+    """Versions of the packages whose behaviour decides a shard's bytes."""
+    out = {}
+    for name in VERSIONED_PACKAGES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
+def new_manifest(config: dict) -> dict:
+    return {"format": FORMAT, "format_version": FORMAT_VERSION, "config": config, "shards": []}
+
+
+def load_manifest(root: str | Path) -> dict | None:
+    """The manifest of ``root``, or None when there is none yet."""
+    path = Path(root) / MANIFEST
+    if not path.exists():
+        return None
+    try:
+        manifest = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{path}: not valid JSON ({err})") from err
+    if manifest.get("format") != FORMAT or "shards" not in manifest:
+        raise ValueError(f"{path}: not a CrafterPlay manifest (expected format {FORMAT!r})")
+    if manifest.get("format_version") != FORMAT_VERSION:
+        raise ValueError(
+            f"{path}: CrafterPlay format version {manifest.get('format_version')!r}, this zoo "
+            f"reads version {FORMAT_VERSION}; regenerate the data with this version"
+        )
+    return manifest
+
+
+def save_manifest(root: str | Path, manifest: dict) -> None:
+    """Write via a temp file and rename, so readers never see half a manifest."""
+    path = Path(root) / MANIFEST
+    tmp = path.with_name(f"{MANIFEST}.tmp-{os.getpid()}")
+    manifest["shards"] = sorted(manifest["shards"], key=lambda entry: entry["index"])
+    tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
+    os.replace(tmp, path)
+
+
+def check_same_config(manifest: dict, config: dict, root: str | Path) -> None:
+    """Refuse to mix datasets: the stored generation arguments must equal the new ones."""
+    stored = manifest.get("config", {})
+    diff = {k: (stored.get(k), config.get(k)) for k in sorted(set(stored) | set(config))
+            if stored.get(k) != config.get(k)}
+    if diff:
+        lines = ", ".join(f"{k}: {old!r} there vs {new!r} now" for k, (old, new) in diff.items())
+        raise DatasetMismatchError(
+            f"{Path(root)} already holds CrafterPlay data generated with other arguments "
+            f"({lines}); use another --out folder or the original arguments to resume"
+        )

@@ -1,0 +1,208 @@
+"""Writing CrafterPlay shards: episodes recorded chunk by chunk, then laid out as tar bytes.
+
+Raw frames never pile up: a chunk of L steps is compressed and appended to the episode's
+spool file as soon as it is full. Chunk metadata (``episode_length``, ``last``) and noop
+runs are only known when the episode ends, so samples are assembled then, into one tar
+fragment per episode; the shard is those fragments in episode order plus the tar trailer.
+Every tar header is fixed (mtime 0, uid 0, mode 644) so a shard's bytes depend on its
+content alone.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tarfile
+import threading
+from concurrent.futures import Executor, Future, ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from zoo.data.codec import FrameCodec, encode_arrays, encode_frames, encode_json
+from zoo.data.noop import noop_runs
+from zoo.envs.schema import FRAME_SHAPE, STATE_FIELDS, State
+
+SHARD_PATTERN = "crafterplay-{index:06d}.tar"
+FRAMES, STATE, STEPS, META = "frames.zst", "state.zst", "steps.zst", "meta.json"
+_BLOCK = tarfile.BLOCKSIZE
+
+
+def sample_key(episode: int, offset: int) -> str:
+    """WebDataset key of the chunk of ``episode`` starting at step ``offset``."""
+    return f"e{episode:07d}_{offset:06d}"
+
+
+def tar_member(name: str, data: bytes) -> bytes:
+    """One regular-file tar member with a fixed header, padded to the 512-byte block."""
+    info = tarfile.TarInfo(name)
+    info.size, info.mtime, info.mode = len(data), 0, 0o644
+    info.uid = info.gid = 0
+    info.uname = info.gname = ""
+    header = info.tobuf(tarfile.USTAR_FORMAT, "utf-8", "strict")
+    return header + data + b"\0" * (-len(data) % _BLOCK)
+
+
+def tar_trailer(size: int) -> bytes:
+    """End-of-archive blocks, padded to tar's 10 KiB record as tarfile writes it."""
+    end = size + 2 * _BLOCK
+    return b"\0" * (2 * _BLOCK + (-end % tarfile.RECORDSIZE))
+
+
+def sha256_file(path: str | Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _spool_chunk(
+    path: Path, frames: np.ndarray, state: State, codec: FrameCodec
+) -> tuple[int, int, int]:
+    """Compress one chunk and append it to the spool; returns (offset, frame bytes, state bytes)."""
+    frame_bytes, state_bytes = encode_frames(frames, codec), encode_arrays(state, codec)
+    with open(path, "ab") as f:
+        offset = f.tell()
+        f.write(frame_bytes + state_bytes)
+    return offset, len(frame_bytes), len(state_bytes)
+
+
+class ChunkEncoder(ThreadPoolExecutor):
+    """One background thread for compression and fragment writing, in submission order.
+
+    ``submit`` blocks while ``max_pending`` jobs wait, so raw chunks queued for compression
+    (16 MB each at L=256) stay bounded when the encoder is slower than the envs.
+    """
+
+    def __init__(self, max_pending: int) -> None:
+        super().__init__(max_workers=1)
+        self._slots = threading.BoundedSemaphore(max_pending)
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        self._slots.acquire()
+        future = super().submit(fn, *args, **kwargs)
+        future.add_done_callback(lambda _: self._slots.release())
+        return future
+
+
+class EpisodeRecorder:
+    """Collects one episode's steps; spools compressed chunks; writes its tar fragment at the end.
+
+    Args:
+        episode: global episode index.
+        seed: the episode's seed (env and agent).
+        workdir: folder for the spool and the finished fragment.
+        chunk_length: steps per sample (the last one may be shorter).
+        meta: fields copied into every chunk's meta (env, expert).
+        encoder: a single-thread executor that compresses chunks and writes the fragment in
+            order (it overlaps with env stepping).
+    """
+
+    def __init__(
+        self,
+        episode: int,
+        seed: int,
+        workdir: Path,
+        chunk_length: int,
+        meta: dict,
+        encoder: Executor,
+        codec: FrameCodec,
+    ) -> None:
+        self.episode, self.seed, self.meta = episode, seed, meta
+        self.chunk_length, self.encoder, self.codec = chunk_length, encoder, codec
+        self.spool = workdir / f"e{episode:07d}.spool"
+        self.fragment = workdir / f"e{episode:07d}.tar"
+        self.spool.unlink(missing_ok=True)
+        self._frames = np.empty((chunk_length, *FRAME_SHAPE), np.uint8)
+        self._state = {
+            k: np.empty((chunk_length, *f.shape), f.dtype) for k, f in STATE_FIELDS.items()
+        }
+        self._fill = 0
+        self._chunks: list[Future] = []
+        self.actions: list[int] = []
+        self.rewards: list[float] = []
+        self.noop: list[bool] = []
+        self.sleeping: list[bool] = []  # per observation, for the manifest's filtered noop ratio
+        self.final_state: State | None = None
+
+    def observe(self, frame: np.ndarray, state: State) -> None:
+        """Add the observation at which the next action is taken (or the final one)."""
+        self._frames[self._fill] = frame
+        for k, v in state.items():
+            self._state[k][self._fill] = v
+        self._fill += 1
+        self.sleeping.append(bool(state["player_sleeping"]))
+        self.final_state = state
+        if self._fill == self.chunk_length:
+            self._flush()
+
+    def act(self, action: int, reward: float, noop: bool) -> None:
+        """Record the action taken at the latest observation, its reward and noop flag."""
+        self.actions.append(action)
+        self.rewards.append(reward)
+        self.noop.append(noop)
+
+    def _flush(self) -> None:
+        n = self._fill
+        frames, state = self._frames[:n].copy(), {k: v[:n].copy() for k, v in self._state.items()}
+        job = self.encoder.submit(_spool_chunk, self.spool, frames, state, self.codec)
+        self._chunks.append(job)
+        self._fill = 0
+
+    def finish(self) -> Future:
+        """Close the episode after its final observation. The fragment is written on the
+        encoder (after the episode's chunks), so play goes on meanwhile; wait on the result."""
+        if self._fill:
+            self._flush()
+        self.act(-1, 0.0, False)
+        steps = {
+            "actions": np.asarray(self.actions, np.int64),
+            "rewards": np.asarray(self.rewards, np.float32),
+            "noop": np.asarray(self.noop, bool),
+        }
+        steps["noop_run"] = noop_runs(steps["noop"])
+        return self.encoder.submit(self._write_fragment, steps)
+
+    def _write_fragment(self, steps: dict[str, np.ndarray]) -> None:
+        length = len(steps["actions"])
+        spans = [future.result() for future in self._chunks]  # done: same single thread
+        with open(self.spool, "rb") as spool, open(self.fragment, "wb") as out:
+            for k, (offset, n_frames, n_state) in enumerate(spans):
+                start = k * self.chunk_length
+                stop = min(start + self.chunk_length, length)
+                spool.seek(offset)
+                key = sample_key(self.episode, start)
+                meta = {
+                    **self.meta,
+                    "episode": self.episode, "seed": self.seed, "offset": start,
+                    "length": stop - start, "episode_length": length, "last": stop == length,
+                }
+                out.write(tar_member(f"{key}.{FRAMES}", spool.read(n_frames)))
+                out.write(tar_member(f"{key}.{STATE}", spool.read(n_state)))
+                chunk_steps = {name: arr[start:stop] for name, arr in steps.items()}
+                out.write(tar_member(f"{key}.{STEPS}", encode_arrays(chunk_steps, self.codec)))
+                out.write(tar_member(f"{key}.{META}", encode_json(meta)))
+        self.spool.unlink()
+
+
+def assemble_shard(fragments: list[Path], path: Path) -> str:
+    """Concatenate episode fragments into ``path`` (via a temp name); return its sha256."""
+    tmp = path.with_name(path.name + f".tmp-{os.getpid()}")
+    digest, size = hashlib.sha256(), 0
+    with open(tmp, "wb") as out:
+        for fragment in fragments:
+            with open(fragment, "rb") as f:
+                for block in iter(lambda: f.read(1 << 20), b""):
+                    out.write(block)
+                    digest.update(block)
+                    size += len(block)
+        trailer = tar_trailer(size)
+        out.write(trailer)
+        digest.update(trailer)
+        out.flush()
+        os.fsync(out.fileno())
+    os.replace(tmp, path)
+    for fragment in fragments:
+        fragment.unlink()
+    return digest.hexdigest()
