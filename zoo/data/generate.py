@@ -34,7 +34,7 @@ from zoo.data.shards import (
     assemble_shard,
     sha256_file,
 )
-from zoo.envs.base import Step
+from zoo.envs.base import Step, episode_seed
 from zoo.envs.constants import ACHIEVEMENT_NAMES
 from zoo.envs.schema import index_state
 
@@ -82,11 +82,6 @@ class GenerationConfig:
     @property
     def codec(self) -> FrameCodec:
         return FrameCodec(self.zstd_level, self.zstd_window_log)
-
-
-def episode_seed(seed: int, episode: int) -> int:
-    """Seed of episode ``episode`` (for env and agent), a function of (seed, episode) only."""
-    return int(np.random.SeedSequence([seed, episode]).generate_state(1, np.uint32)[0])
 
 
 class ShardGenerator:

@@ -60,3 +60,14 @@ def check_seeds(seeds: np.ndarray, num_envs: int) -> np.ndarray:
     if seeds.shape != (num_envs,):
         raise ValueError(f"seeds has shape {seeds.shape}, expected ({num_envs},): one per env")
     return seeds.astype(np.int64)
+
+
+def episode_seed(seed: int, episode: int) -> int:
+    """Seed of episode ``episode`` of a run seeded ``seed``, for both env and agent.
+
+    A function of (seed, episode) alone, so datasets and evaluations do not depend on batch
+    size, worker count or the order episodes finish in.
+    """
+    if seed < 0 or episode < 0:
+        raise ValueError(f"seed and episode index must be >= 0, got seed={seed}, episode={episode}")
+    return int(np.random.SeedSequence([seed, episode]).generate_state(1, np.uint32)[0])

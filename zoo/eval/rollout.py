@@ -15,15 +15,8 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from zoo.agents.base import Agent
-from zoo.envs.base import GameEnv
+from zoo.envs.base import GameEnv, episode_seed
 from zoo.envs.constants import NUM_ACHIEVEMENTS
-
-
-def episode_seed(seed: int, index: int) -> int:
-    """Seed of episode ``index`` of a run seeded ``seed`` (independent streams per episode)."""
-    if seed < 0 or index < 0:
-        raise ValueError(f"seed and episode index must be >= 0, got seed={seed}, index={index}")
-    return int(np.random.SeedSequence([seed, index]).generate_state(1)[0])
 
 
 @dataclass
