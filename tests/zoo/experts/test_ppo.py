@@ -117,6 +117,8 @@ def test_gae_matches_hand_computed_values():
 
 def test_death_penalty_on_death_not_on_time_limit(craftax_env):
     env = CraftaxTrainEnv(num_envs=3, max_episode_steps=50, death_penalty=-10.0)
+    # The shared fixture may hold any state other tests left; start from fresh worlds.
+    craftax_env.reset(np.array([11, 12]))
     # Three live Craftax states (the fixture's two and a copy of the first): env 0 dies
     # (health 0), env 1 reaches the time limit, env 2 plays on.
     states = jax.tree_util.tree_map(lambda x: jnp.concatenate([x, x[:1]]), craftax_env.raw_state)
