@@ -16,9 +16,11 @@ TRAIN_VERBS = ("fit", "validate", "test", "predict")
 TOP_LEVEL = (
     ("zoo.data.cli", "register"),
     ("zoo.eval.cli", "register"),
+    ("zoo.eval.curves", "register"),
     ("zoo.captions.cli", "register"),
     ("zoo.experts.cli", "register"),
     ("zoo.export_cli", "register"),
+    ("zoo.demo", "register"),
 )
 
 

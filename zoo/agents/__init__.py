@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from zoo.agents.base import Agent, RandomAgent
 
-AGENT_NAMES = ("random", "scripted", "ppo")
+AGENT_NAMES = ("random", "scripted", "ppo", "cvpt")
 
 
 def make_agent(name: str, num_envs: int, checkpoint: str | None = None) -> Agent:
@@ -15,13 +17,50 @@ def make_agent(name: str, num_envs: int, checkpoint: str | None = None) -> Agent
         from zoo.experts.scripted import ScriptedExpert
 
         return ScriptedExpert(num_envs)
+    if name in ("ppo", "cvpt") and checkpoint is None:
+        kind = "a PPO expert checkpoint dir" if name == "ppo" else "a C-VPT .ckpt or export dir"
+        raise ValueError(f"agent {name!r} needs --checkpoint PATH ({kind})")
     if name == "ppo":
-        if checkpoint is None:
-            raise ValueError("agent 'ppo' needs --checkpoint PATH (a PPO expert checkpoint dir)")
         from zoo.experts.ppo import PPOExpert
 
         return PPOExpert.load(checkpoint, num_envs)
+    if name == "cvpt":
+        from zoo.agents.cvpt_agent import CVPTAgent
+
+        return CVPTAgent.from_checkpoint(checkpoint, num_envs)
     raise ValueError(f"unknown agent {name!r}; expected one of {AGENT_NAMES}")
 
 
-__all__ = ["AGENT_NAMES", "Agent", "RandomAgent", "make_agent"]
+def checkpoint_kind(path: str | Path) -> str:
+    """Which trained agent a checkpoint holds, from its layout alone.
+
+    A PPO run or checkpoint folder has ``meta.json`` files; a C-VPT export folder has
+    ``model.safetensors``; a Lightning ``.ckpt`` file is a C-VPT run.
+    """
+    path = Path(path)
+    if path.is_file() and path.suffix == ".ckpt":
+        return "cvpt"
+    if path.is_dir():
+        if (path / "model.safetensors").is_file():
+            return "cvpt"
+        if (path / "meta.json").is_file() or any(path.glob("update_*/meta.json")):
+            return "ppo"
+    raise ValueError(
+        f"cannot tell what {path} holds: expected a C-VPT .ckpt, a `zoo export` folder "
+        "(model.safetensors) or a PPO checkpoint/run folder (meta.json); pass --agent"
+    )
+
+
+def load_checkpoint_agent(path: str | Path, num_envs: int) -> Agent:
+    """The trained agent stored at ``path`` (see ``checkpoint_kind``), for ``num_envs`` envs."""
+    return make_agent(checkpoint_kind(path), num_envs, str(path))
+
+
+__all__ = [
+    "AGENT_NAMES",
+    "Agent",
+    "RandomAgent",
+    "checkpoint_kind",
+    "load_checkpoint_agent",
+    "make_agent",
+]

@@ -125,8 +125,14 @@ def _caption(args: argparse.Namespace) -> int:
     return 0
 
 
+def _query(args: argparse.Namespace) -> int:
+    from zoo.cclip_demo import run_query
+
+    return run_query(args)
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add `zoo captions list|paraphrase`."""
+    """Add `zoo captions list|paraphrase|query`."""
     captions = subparsers.add_parser("captions", help="the 61 CrafterCaption captions, paraphrases")
     sub = captions.add_subparsers(dest="captions_command", metavar="ACTION", required=True)
     listing = sub.add_parser("list", help="print every caption with its rule and category")
@@ -145,6 +151,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         return _paraphrase(args)
 
     para.set_defaults(handler=check)
+    query = sub.add_parser(
+        "query",
+        help="zero-shot: the captions a trained C-CLIP finds best for a clip",
+        description="Print the k best of the 61 captions for one clip, `score<TAB>caption` "
+        "per line. A clip is a CrafterCaption sample's frames file (.npy.zst, extract it from "
+        "a shard with `tar xf`) or any uint8 (6, 144, 144, 3) .npy.",
+    )
+    query.add_argument("--checkpoint", required=True, help="C-CLIP .ckpt from `zoo fit`")
+    query.add_argument("--clip", required=True, help="uint8 (6, 144, 144, 3) .npy or .npy.zst")
+    query.add_argument("--k", type=int, default=5, help="how many captions to print")
+    query.add_argument("--device", default="cpu", help="torch device, e.g. cuda")
+    query.set_defaults(handler=_query)
 
 
 def register_data_commands(data_subparsers: argparse._SubParsersAction) -> None:

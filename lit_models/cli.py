@@ -1,0 +1,70 @@
+"""LightningCLI for every model in the zoo: `zoo fit --config configs/<model>.yaml`.
+
+Models and datamodules are chosen by ``class_path`` in the YAML (subclass mode), so C-VPT,
+C-CLIP and the rest share this one entry point.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import lightning as L
+import yaml
+from lightning.pytorch.cli import LightningCLI, SaveConfigCallback
+from lightning.pytorch.loggers import WandbLogger
+
+
+class WandbSaveConfigCallback(SaveConfigCallback):
+    """Writes config.yaml (as usual) and also logs the full config to W&B on rank 0."""
+
+    def save_config(self, trainer: L.Trainer, pl_module: L.LightningModule, stage: str) -> None:
+        if not trainer.is_global_zero:
+            return
+        config = yaml.safe_load(self.parser.dump(self.config, skip_none=False))
+        for logger in trainer.loggers:
+            if isinstance(logger, WandbLogger):
+                logger.log_hyperparams({"config": config})
+
+
+class ZooCLI(LightningCLI):
+    """Puts each run in its own folder: ``<trainer.default_root_dir>/<time>-<pid>``.
+
+    The logger's ``save_dir`` and a ModelCheckpoint without ``dirpath`` follow that folder,
+    so config.yaml, W&B files and checkpoints of one run sit together and never collide.
+    """
+
+    def before_instantiate_classes(self) -> None:
+        config = self.config[self.subcommand] if self.subcommand else self.config
+        root = Path(config.trainer.default_root_dir or "runs")
+        run_dir = root / f"{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
+        config.trainer.default_root_dir = str(run_dir)
+        loggers = config.trainer.logger
+        for logger in loggers if isinstance(loggers, list) else [loggers]:
+            init_args = getattr(logger, "init_args", None)
+            if init_args is not None and "save_dir" in init_args:
+                init_args.save_dir = str(run_dir)
+        for callback in config.trainer.callbacks or []:
+            init_args = getattr(callback, "init_args", None)
+            if callback.class_path.endswith("ModelCheckpoint") and init_args.dirpath is None:
+                init_args.dirpath = str(run_dir / "checkpoints")
+
+
+def run_lightning_cli(argv: list[str]) -> LightningCLI:
+    """Run ``zoo fit|validate|test|predict ARGS`` (argv starts with the verb)."""
+    cli = ZooCLI(
+        L.LightningModule,
+        L.LightningDataModule,
+        subclass_mode_model=True,
+        subclass_mode_data=True,
+        save_config_callback=WandbSaveConfigCallback,
+        save_config_kwargs={"overwrite": True},
+        auto_configure_optimizers=False,
+        args=argv,
+        run=True,
+    )
+    for logger in cli.trainer.loggers:
+        if isinstance(logger, WandbLogger):  # the next in-process run gets its own W&B run
+            logger.experiment.finish()
+    return cli

@@ -1,0 +1,72 @@
+"""`zoo fit` through LightningCLI on the smoke config: runs in-process and resumes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+from lightning.pytorch.loggers import WandbLogger
+
+from lit_models.cli import run_lightning_cli
+from lit_models.cvpt import CVPT
+from zoo.data.generate import GenerationConfig, generate
+
+CONFIG = Path(__file__).resolve().parents[1] / "configs" / "cvpt_smoke.yaml"
+
+
+@pytest.fixture(scope="module")
+def crafterplay(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("crafterplay")
+    config = GenerationConfig(
+        expert="random", episodes=6, seed=1, env="crafter", episodes_per_shard=2,
+        chunk_length=32, max_steps=80,
+    )
+    generate(config, out, progress=False)
+    return out
+
+
+def _fit(crafterplay: Path, root: Path, max_steps: int, *extra: str):
+    return run_lightning_cli([
+        "fit", f"--config={CONFIG}", f"--trainer.default_root_dir={root}",
+        f"--trainer.max_steps={max_steps}", "--trainer.limit_val_batches=1",
+        "--trainer.enable_progress_bar=false", f"--data.init_args.root={crafterplay}",
+        "--data.init_args.seq_len=8", "--data.init_args.batch_size=2",
+        "--data.init_args.num_workers=0", "--data.init_args.val_fraction=0.3",
+        "--data.init_args.train_batches_per_epoch=2", "--model.init_args.tbptt_len=4",
+        "--model.init_args.memory_len=4", *extra,
+    ])
+
+
+def test_fit_writes_run_folder_and_resumes_at_the_same_step(
+    crafterplay: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    started: list[int] = []
+    monkeypatch.setattr(CVPT, "on_train_start", lambda self: started.append(self.global_step))
+    logged: list[dict] = []
+    log_hyperparams = WandbLogger.log_hyperparams
+    monkeypatch.setattr(
+        WandbLogger, "log_hyperparams", lambda self, p: (logged.append(dict(p)), log_hyperparams(self, p))
+    )
+    first = _fit(crafterplay, tmp_path, 2)
+    assert first.trainer.global_step == 2
+    (run_dir,) = tmp_path.iterdir()
+    assert (run_dir / "config.yaml").is_file() and (run_dir / "wandb").is_dir()
+    last = run_dir / "checkpoints" / "last.ckpt"
+    assert torch.load(last, weights_only=True)["global_step"] == 2
+    assert any(p.name.startswith("best-") for p in (run_dir / "checkpoints").iterdir())
+    full_configs = [p["config"] for p in logged if "config" in p]
+    assert full_configs[0]["model"]["class_path"] == "lit_models.cvpt.CVPT"
+    assert full_configs[0]["trainer"]["max_steps"] == 2
+
+    # the checkpoint plays and exports without Lightning
+    from zoo.cli import main as zoo_main
+    from zoo.export import load_checkpoint_model, load_exported
+
+    assert zoo_main(["export", str(last), str(tmp_path / "export")]) == 0
+    assert load_exported(tmp_path / "export").config == load_checkpoint_model(last).config
+
+    resumed = _fit(crafterplay, tmp_path, 3, f"--ckpt_path={last}")
+    assert started == [0, 2]
+    assert resumed.trainer.global_step == 3
+    assert len([p for p in tmp_path.iterdir() if p.name != "export"]) == 2  # resumed run: own folder

@@ -1,0 +1,61 @@
+"""C-VPT network: preset sizes against the paper, frame layouts, and clear errors."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from zoo.models.cvpt import PAPER_PARAMS, CVPTConfig, CVPTModel
+
+SMALL = dict(d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(4, 8, 8), encoder_hidden=32)
+
+
+@pytest.mark.parametrize("name", ["tiny", "base", "large"])
+def test_preset_parameter_counts_match_paper(name: str) -> None:
+    with torch.device("meta"):  # counts only; no memory for the 64M-parameter model
+        model = CVPTModel(CVPTConfig.from_name(name))
+    assert abs(model.get_num_params() / PAPER_PARAMS[name] - 1) < 0.05
+
+
+def test_unknown_preset_and_config_fields_are_errors() -> None:
+    with pytest.raises(ValueError, match="unknown C-VPT preset 'huge'"):
+        CVPTConfig.from_name("huge")
+    with pytest.raises(ValueError, match=r"unknown CVPTConfig fields \['hidsize'\]"):
+        CVPTConfig.from_dict({"hidsize": 3})
+
+
+def test_config_dict_round_trip() -> None:
+    config = CVPTConfig.from_name("tiny", **SMALL)
+    assert CVPTConfig.from_dict(config.to_dict()) == config
+
+
+def test_channels_last_and_first_frames_give_same_logits() -> None:
+    torch.manual_seed(0)
+    model = CVPTModel(CVPTConfig.from_name("tiny", **SMALL)).eval()
+    frames = torch.randint(0, 256, (2, 3, 144, 144, 3), dtype=torch.uint8)
+    first = torch.zeros(2, 3, dtype=torch.bool)
+    with torch.no_grad():
+        hwc, _ = model(frames, first, model.initial_state(2))
+        chw, _ = model(frames.permute(0, 1, 4, 2, 3), first, model.initial_state(2))
+    assert hwc.shape == (2, 3, 17)
+    torch.testing.assert_close(hwc, chw)
+
+
+def test_wrong_frame_shape_or_dtype_is_a_clear_error() -> None:
+    model = CVPTModel(CVPTConfig.from_name("tiny", **SMALL))
+    first = torch.zeros(1, 1, dtype=torch.bool)
+    bad = torch.zeros(1, 1, 64, 64, 3, dtype=torch.uint8)
+    with pytest.raises(ValueError, match=r"\(B, T, 144, 144, 3\) or \(B, T, 3, 144, 144\), got \(1, 1, 64, 64, 3\)"):
+        model(bad, first, model.initial_state(1))
+    with pytest.raises(TypeError, match="frames must be uint8"):
+        model(torch.zeros(1, 1, 144, 144, 3), first, model.initial_state(1))
+
+
+def test_value_head_only_when_configured() -> None:
+    model = CVPTModel(CVPTConfig.from_name("tiny", **SMALL, value_head=True))
+    hidden, _ = model.features(
+        torch.zeros(1, 2, 144, 144, 3, dtype=torch.uint8), torch.zeros(1, 2), model.initial_state(1)
+    )
+    assert model.value_head(hidden).shape == (1, 2)
+    with pytest.raises(RuntimeError, match="value_head=False"):
+        CVPTModel(CVPTConfig.from_name("tiny", **SMALL)).value_head(hidden)

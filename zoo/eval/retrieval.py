@@ -1,0 +1,109 @@
+"""Video -> text retrieval metrics for C-CLIP (paper section 5.3: R@1/5/10 and mean rank over 64).
+
+The candidate set, precisely: held-out clips are cut, in data order, into groups of
+`group_size` (64) consecutive clips; within a group every clip is a query and the group's 64
+captions (each clip's own caption text, duplicates kept) are the candidates. CrafterCaption has
+only 61 template captions, so a group usually holds several clips with the same caption id; any
+candidate with the query's caption id counts as a correct answer. A query's rank is 1 + the
+number of candidates with another caption id that score strictly higher than its best-scoring
+correct candidate; R@k is the fraction of queries with a correct candidate in the top k
+(torchmetrics' hit rate, which is recall when each query has exactly one correct candidate),
+MeanR the mean rank. A trailing group shorter than `group_size` is dropped so every query
+competes against the same number of candidates.
+"""
+
+from collections.abc import Sequence
+
+import torch
+from torchmetrics.retrieval import RetrievalHitRate
+
+DEFAULT_TOP_KS = (1, 5, 10)
+
+
+def best_correct_rank(
+    similarity: torch.Tensor, query_ids: torch.Tensor, candidate_ids: torch.Tensor
+) -> torch.Tensor:
+    """(Q,) 1-based rank of each query's best-scoring correct candidate."""
+    correct = query_ids[:, None] == candidate_ids[None, :]
+    if not bool(correct.any(dim=1).all()):
+        raise ValueError("every query needs at least one candidate with its own caption id")
+    best_correct = similarity.masked_fill(~correct, float("-inf")).max(dim=1, keepdim=True).values
+    return 1 + ((similarity > best_correct) & ~correct).sum(dim=1)
+
+
+def retrieval_metrics(
+    similarity: torch.Tensor,
+    query_ids: torch.Tensor,
+    candidate_ids: torch.Tensor,
+    top_ks: Sequence[int] = DEFAULT_TOP_KS,
+) -> dict[str, float]:
+    """R@k and MeanR for one similarity matrix (Q queries x C candidates)."""
+    if similarity.ndim != 2 or similarity.shape != (len(query_ids), len(candidate_ids)):
+        raise ValueError(
+            f"similarity must be (queries, candidates) = ({len(query_ids)}, {len(candidate_ids)}), "
+            f"got {tuple(similarity.shape)}"
+        )
+    return _metrics_from_blocks([similarity], [query_ids], [candidate_ids], top_ks)
+
+
+def grouped_retrieval_metrics(
+    video_embeddings: torch.Tensor,
+    text_embeddings: torch.Tensor,
+    caption_ids: torch.Tensor,
+    group_size: int = 64,
+    top_ks: Sequence[int] = DEFAULT_TOP_KS,
+) -> dict[str, float]:
+    """Video -> text retrieval over consecutive groups of `group_size` clips (see module doc).
+
+    Args:
+        video_embeddings: (N, D) unit-norm clip embeddings.
+        text_embeddings: (N, D) unit-norm embeddings of each clip's own caption.
+        caption_ids: (N,) template caption id of each clip.
+
+    Returns:
+        {"R@1": ..., "R@5": ..., "R@10": ..., "MeanR": ..., "queries": N used}, recalls in [0, 1].
+    """
+    count = len(caption_ids)
+    if video_embeddings.shape[0] != count or text_embeddings.shape[0] != count:
+        raise ValueError(
+            f"need one video and one text embedding per caption id ({count}), got "
+            f"{video_embeddings.shape[0]} and {text_embeddings.shape[0]}"
+        )
+    if count < group_size:
+        raise ValueError(f"retrieval needs at least {group_size} clips, got {count}")
+    num_groups = count // group_size
+    similarities, query_ids = [], []
+    for group in range(num_groups):
+        rows = slice(group * group_size, (group + 1) * group_size)
+        similarities.append(video_embeddings[rows].float() @ text_embeddings[rows].float().T)
+        query_ids.append(caption_ids[rows])
+    return _metrics_from_blocks(similarities, query_ids, query_ids, top_ks)
+
+
+def _metrics_from_blocks(
+    similarities: list[torch.Tensor],
+    query_ids: list[torch.Tensor],
+    candidate_ids: list[torch.Tensor],
+    top_ks: Sequence[int],
+) -> dict[str, float]:
+    hit_rates = {k: RetrievalHitRate(top_k=k) for k in top_ks}
+    ranks = []
+    first_query = 0
+    for similarity, queries, candidates in zip(similarities, query_ids, candidate_ids, strict=True):
+        similarity = similarity.detach().float().cpu()
+        queries, candidates = queries.cpu(), candidates.cpu()
+        ranks.append(best_correct_rank(similarity, queries, candidates))
+        num_queries, num_candidates = similarity.shape
+        query_index = torch.arange(first_query, first_query + num_queries)
+        first_query += num_queries
+        correct = queries[:, None] == candidates[None, :]
+        for metric in hit_rates.values():
+            metric.update(
+                similarity.flatten(),
+                correct.flatten(),
+                indexes=query_index.repeat_interleave(num_candidates),
+            )
+    metrics = {f"R@{k}": float(metric.compute()) for k, metric in hit_rates.items()}
+    metrics["MeanR"] = float(torch.cat(ranks).float().mean())
+    metrics["queries"] = float(first_query)
+    return metrics

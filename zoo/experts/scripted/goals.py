@@ -1,0 +1,343 @@
+"""The goal logic of one env: survival first, then side achievements and the tech tree.
+
+``EnvPlanner.act`` walks a fixed priority list each step; each goal returns an action or
+None ("nothing to do / cannot"), and the first action wins. Nothing is cached between steps
+but a few decisions that must persist (the pocket being sealed, an exploration target).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from zoo.envs.constants import Achievement as Ach
+from zoo.envs.constants import Action, Block, Item, Mob
+from zoo.experts.scripted.config import ExpertConfig
+from zoo.experts.scripted.navigation import next_to, shift
+from zoo.experts.scripted.skills import (
+    act_on,
+    craft,
+    crafting_spots,
+    explore_step,
+    face_free,
+    go_to,
+    goal_distance,
+    pick_explore_target,
+)
+from zoo.experts.scripted.survival import SurvivalGoals
+from zoo.experts.scripted.world import MOVES, PLACEABLE, STONE_PLACEABLE, WALL, View
+
+# Tool -> (action, wood, stone, coal, iron, needs furnace). Craftax also takes stone for iron tools.
+RECIPES = {
+    Item.WOOD_PICKAXE: (Action.MAKE_WOOD_PICKAXE, 1, 0, 0, 0, False),
+    Item.WOOD_SWORD: (Action.MAKE_WOOD_SWORD, 1, 0, 0, 0, False),
+    Item.STONE_PICKAXE: (Action.MAKE_STONE_PICKAXE, 1, 1, 0, 0, False),
+    Item.STONE_SWORD: (Action.MAKE_STONE_SWORD, 1, 1, 0, 0, False),
+    Item.IRON_PICKAXE: (Action.MAKE_IRON_PICKAXE, 1, 1, 1, 1, True),
+    Item.IRON_SWORD: (Action.MAKE_IRON_SWORD, 1, 1, 1, 1, True),
+}
+
+
+class EnvPlanner(SurvivalGoals):
+    """Memory and decisions of the expert in one env; re-created at every episode start."""
+
+    def __init__(self, seed: int, config: ExpertConfig) -> None:
+        super().__init__(config)
+        self.rng = np.random.default_rng(seed)
+        self.explore_target: tuple[int, int] | None = None
+        self.explore_until = 0
+        self.plant_guard: tuple[int, int] | None = None
+        self.last_goal = ""  # which goal chose the last action (for traces and tests)
+
+    # --- the priority list ---------------------------------------------------------------
+    def act(self, v: View) -> int:
+        """The action of the first goal, in priority order, that has something to do."""
+        if v.sleeping:
+            self.last_goal = "asleep"
+            return int(Action.NOOP)  # both games ignore actions while the player sleeps
+        for goal in (
+            self._arm,
+            self._flee_unarmed,
+            self._fight_adjacent,
+            self._dodge_arrows,
+            self._engage_zombie,
+            self._critical_needs,
+            self._dusk_supplies,
+            self._sleep,
+            self._urgent_needs,
+            self._basic_tools,
+            self._first_stone,
+            self._stone_tools,
+            self._side_goals,
+            self._tech_tree,
+            self._late_goals,
+            self._explore,
+        ):
+            action = goal(v)
+            if action is not None:
+                self.last_goal = goal.__name__
+                return int(action)
+        self.last_goal = "random"
+        moves = [m for m in MOVES if v.is_free(v.neighbour(v.pos, m))]  # never into lava
+        return int(self.rng.choice(moves)) if moves else int(Action.NOOP)
+
+    # --- cheap achievements and top-ups ----------------------------------------------------
+    def _side_goals(self, v: View) -> int | None:
+        """Achievements that are cheap when at hand: mobs, ripe plants, water, cows, saplings."""
+        cfg = self.cfg
+        if not v.done(Ach.DEFEAT_ZOMBIE) and v.health >= cfg.fight_health:
+            action = act_on(v, v.mobs == Mob.ZOMBIE, int(Action.DO), cfg.hunt_dist)
+            if action is not None:
+                return action
+        if self._skeleton_ready(v):
+            action = act_on(v, v.mobs == Mob.SKELETON, int(Action.DO), cfg.hunt_dist)
+            if action is not None:
+                return action
+        if not v.done(Ach.EAT_PLANT):
+            action = act_on(v, v.map == Block.RIPE_PLANT, int(Action.DO))
+            if action is not None:
+                return action
+        if not v.done(Ach.COLLECT_DRINK) or v.drink < 9:
+            limit = cfg.near if not v.done(Ach.COLLECT_DRINK) else 2
+            action = self._drink(v, limit)
+            if action is not None:
+                return action
+        if not v.done(Ach.EAT_COW) or v.food < 7:
+            limit = cfg.near if not v.done(Ach.EAT_COW) else 3
+            action = act_on(v, v.mobs == Mob.COW, int(Action.DO), limit)
+            if action is not None:
+                return action
+        action = self._plants(v)
+        if action is not None:
+            return action
+        if v.has(Item.STONE) and not v.done(Ach.PLACE_STONE):
+            valid = STONE_PLACEABLE[v.map] & (v.mobs == 0)
+            action = face_free(v, valid, int(Action.PLACE_STONE), max_dist=cfg.near)
+            if action is not None:
+                return action
+        return None
+
+    def _skeleton_ready(self, v: View) -> bool:
+        """Skeletons shoot: chase them only armed (a stone sword kills in one hit) and healthy."""
+        return (
+            not v.done(Ach.DEFEAT_SKELETON)
+            and v.has(Item.STONE_SWORD)
+            and v.health >= self.cfg.skeleton_health
+        )
+
+    def _plants(self, v: View) -> int | None:
+        """Collect saplings and plant them (sheltered if possible); guard the plant."""
+        cfg = self.cfg
+        grass = (v.map == Block.GRASS) & (v.mobs == 0)
+        if self.plant_guard is not None:
+            action = self._guard_plant(v)
+            if action is not None:
+                return action
+        planted = int(np.count_nonzero((v.map == Block.PLANT) | (v.map == Block.RIPE_PLANT)))
+        if planted >= cfg.plants_wanted and v.done(Ach.COLLECT_SAPLING):
+            return None
+        if v.has(Item.SAPLING):
+            sheltered = self._sheltered_grass(v, grass)
+            for spots in (sheltered, grass):
+                action = face_free(v, spots, int(Action.PLACE_PLANT), max_dist=cfg.near)
+                if action is not None:
+                    if action == Action.PLACE_PLANT and sheltered[v.facing]:
+                        self.plant_guard = v.pos
+                    return action
+            return None
+        if planted < cfg.plants_wanted or not v.done(Ach.COLLECT_SAPLING):
+            return face_free(v, grass, int(Action.DO), max_dist=cfg.near)
+        return None
+
+    def _sheltered_grass(self, v: View, grass: np.ndarray) -> np.ndarray:
+        """Grass with walls on three sides: once planted, one stone seals it from trampling."""
+        wall = (WALL[v.map] | (v.map == Block.WATER)).astype(np.int8)
+        sides = ((0, 1), (0, -1), (1, 0), (-1, 0))
+        count = sum(shift(wall, dr, dc, True).astype(np.int8) for dr, dc in sides)
+        return grass & (count == 3)
+
+    def _guard_plant(self, v: View) -> int | None:
+        """Close the one open side of a sheltered plant with a stone."""
+        cell = self.plant_guard
+        plant_next = any(
+            v.block(v.neighbour(cell, m)) in (Block.PLANT, Block.RIPE_PLANT) for m in MOVES
+        )
+        if not plant_next or not STONE_PLACEABLE[v.block(cell)] or v.mob(cell):
+            self.plant_guard = None
+            return None
+        if not v.has(Item.STONE):
+            return None
+        target = np.zeros(v.shape, bool)
+        target[cell] = True
+        stand = np.ones(v.shape, bool)
+        stand[cell] = False
+        return face_free(v, target, int(Action.PLACE_STONE), stand, max_dist=self.cfg.station_dist)
+
+    # --- the tech tree ---------------------------------------------------------------------
+    def _basic_tools(self, v: View) -> int | None:
+        """A wood sword and pickaxe first (fists take five hits per zombie), and wood to spare
+        for the stone tools: trees are scarce where stone is."""
+        missing = [t for t in (Item.WOOD_SWORD, Item.WOOD_PICKAXE) if not v.has(t)]
+        if not missing:
+            return None
+        table_dist = goal_distance(v, crafting_spots(v, Block.TABLE) & v.free)
+        table_near = table_dist <= self.cfg.station_dist
+        wanted = min(9, self._wood_wanted(v) + (0 if table_near else self.cfg.table_wood))
+        if v.inv[Item.WOOD] < wanted:
+            action = act_on(v, v.map == Block.TREE, int(Action.DO), 2 * self.cfg.near)
+            if action is not None:
+                return action
+        return self._make(v, missing[0])
+
+    @staticmethod
+    def _minable_stone(v: View) -> np.ndarray:
+        """Stone worth mining: not the stones that fence in a plant."""
+        plants = (v.map == Block.PLANT) | (v.map == Block.RIPE_PLANT)
+        return (v.map == Block.STONE) & ~next_to(plants)
+
+    def _first_stone(self, v: View) -> int | None:
+        """A few stones early: pockets to sleep in at night are built from them."""
+        if v.has(Item.WOOD_PICKAXE) and v.inv[Item.STONE] < self.cfg.early_stone:
+            return act_on(v, self._minable_stone(v), int(Action.DO))
+        return None
+
+    def _stone_tools(self, v: View) -> int | None:
+        """Stone sword and pickaxe as soon as there is stone: two-hit zombies, and iron."""
+        if not v.has(Item.STONE):
+            return None
+        for tool in (Item.STONE_SWORD, Item.STONE_PICKAXE):
+            if not v.has(tool):
+                return self._make(v, tool)
+        return None
+
+    def _tech_tree(self, v: View) -> int | None:
+        """Wood and stone stock, stone tools, furnace, coal and iron, iron tools, diamond."""
+        cfg = self.cfg
+        if v.inv[Item.WOOD] < self._wood_wanted(v):
+            action = act_on(v, v.map == Block.TREE, int(Action.DO), cfg.near)
+            if action is not None:
+                return action
+        if v.inv[Item.STONE] < self._stone_wanted(v):
+            action = act_on(v, self._minable_stone(v), int(Action.DO))
+            if action is not None:
+                return action
+        for tool in (Item.STONE_PICKAXE, Item.STONE_SWORD):
+            if not v.has(tool):
+                return self._make(v, tool)
+        if not v.done(Ach.PLACE_FURNACE):
+            action = self._station(v, furnace=True)
+            if action is not None:
+                return action
+        iron_tools_missing = sum(not v.has(t) for t in (Item.IRON_PICKAXE, Item.IRON_SWORD))
+        for item, block, target in (
+            (Item.COAL, Block.COAL, cfg.coal_target),
+            (Item.IRON, Block.IRON, cfg.iron_target),
+        ):
+            if v.inv[item] < min(iron_tools_missing, target):
+                action = act_on(v, v.map == block, int(Action.DO))
+                if action is not None:
+                    return action
+        for tool in (Item.IRON_PICKAXE, Item.IRON_SWORD):
+            if not v.has(tool):
+                action = self._make(v, tool)
+                if action is not None:
+                    return action
+        if v.has(Item.IRON_PICKAXE) and not v.done(Ach.COLLECT_DIAMOND):
+            return act_on(v, v.map == Block.DIAMOND, int(Action.DO))
+        return None
+
+    def _wood_wanted(self, v: View) -> int:
+        """Wood for the tools still missing plus one spare table."""
+        tools = sum(not v.has(t) for t in RECIPES)
+        return min(self.cfg.wood_target, tools + self.cfg.table_wood)
+
+    def _stone_wanted(self, v: View) -> int:
+        return self.cfg.stone_target if v.has(Item.WOOD_PICKAXE) else 0
+
+    def _make(self, v: View, tool: Item) -> int | None:
+        """Fetch what ``tool`` takes, reach (or build) its stations and craft it."""
+        action, wood, stone, coal, iron, furnace = RECIPES[tool]
+        cfg = self.cfg
+        for item, n, block in (
+            (Item.WOOD, wood, Block.TREE),
+            (Item.STONE, stone, Block.STONE),
+            (Item.COAL, coal, Block.COAL),
+            (Item.IRON, iron, Block.IRON),
+        ):
+            if v.inv[item] < n:
+                target = self._minable_stone(v) if block == Block.STONE else v.map == block
+                return act_on(v, target, int(Action.DO))
+        blocks = (Block.TABLE, Block.FURNACE) if furnace else (Block.TABLE,)
+        spots = crafting_spots(v, *blocks)
+        if goal_distance(v, spots & v.free) <= cfg.station_dist:
+            return craft(v, spots, int(action))
+        station = self._station(v, furnace, extra_wood=wood, extra_stone=stone)
+        if station is not None:
+            return station
+        return craft(v, spots, int(action))
+
+    def _station(
+        self, v: View, furnace: bool, extra_wood: int = 0, extra_stone: int = 0
+    ) -> int | None:
+        """Build a table (and a furnace beside it) near the player."""
+        cfg = self.cfg
+        table_spots = crafting_spots(v, Block.TABLE)
+        valid = PLACEABLE[v.map] & (v.mobs == 0)
+        if goal_distance(v, table_spots & v.free) > cfg.station_dist:
+            if v.inv[Item.WOOD] < cfg.table_wood + extra_wood:
+                return act_on(v, v.map == Block.TREE, int(Action.DO))
+            return face_free(v, valid, int(Action.PLACE_TABLE))
+        if not furnace:
+            return None
+        if v.inv[Item.STONE] < cfg.furnace_stone + extra_stone:
+            if not v.has(Item.WOOD_PICKAXE):
+                return None
+            return act_on(v, self._minable_stone(v), int(Action.DO))
+        return face_free(v, valid, int(Action.PLACE_FURNACE), stand=table_spots)
+
+    # --- after the tree: the hunts that need luck --------------------------------------------
+    def _late_goals(self, v: View) -> int | None:
+        """Seek skeletons in the tunnels (they spawn on path tiles); else stock up nearby."""
+        cfg = self.cfg
+        if self._skeleton_ready(v):
+            path = v.map == Block.PATH
+            tunnels = path & (_box_count(path, 4) >= cfg.tunnel_density) & v.free
+            action = go_to(v, tunnels)
+            if action is not None and self.rng.random() < cfg.tunnel_bias:
+                return action
+        if v.inv[Item.WOOD] < cfg.late_wood:
+            action = act_on(v, v.map == Block.TREE, int(Action.DO), cfg.near)
+            if action is not None:
+                return action
+        if v.drink < cfg.dusk_drink:
+            action = self._drink(v, cfg.near * 2)
+            if action is not None:
+                return action
+        if v.food < cfg.dusk_food:
+            action = self._eat(v, cfg.near * 2)
+            if action is not None:
+                return action
+        return None
+
+    def _explore(self, v: View) -> int | None:
+        """Walk to random far cells (seeded per env) when nothing else applies."""
+        cfg = self.cfg
+        stale = v.timestep >= self.explore_until or v.pos == self.explore_target
+        if self.explore_target is None or stale:
+            self.explore_target = pick_explore_target(v, self.rng, cfg.explore_dist)
+            self.explore_until = v.timestep + cfg.explore_steps
+        return explore_step(v, self.explore_target)
+
+
+def _box_count(mask: np.ndarray, radius: int) -> np.ndarray:
+    """Number of ``mask`` cells in the (2r+1)^2 box around each cell."""
+    padded = np.pad(mask.astype(np.int32), radius + 1)
+    csum = padded.cumsum(0).cumsum(1)
+    k = 2 * radius + 1
+    rows, cols = mask.shape
+    return (
+        csum[k : k + rows, k : k + cols]
+        - csum[0:rows, k : k + cols]
+        - csum[k : k + rows, 0:cols]
+        + csum[0:rows, 0:cols]
+    )
+
