@@ -49,3 +49,14 @@ def test_demo_generates_data_and_a_report(tmp_path, capsys):
     assert (out / "eval" / "episode.gif").stat().st_size > 0
     (out / "file").write_text("")
     assert main(["demo", "--out", str(out / "file")]) == 2
+
+
+def test_zoo_package_never_imports_lightning():
+    code = (
+        "import pkgutil, importlib, sys, zoo\n"
+        "for m in pkgutil.walk_packages(zoo.__path__, 'zoo.'):\n"
+        "    importlib.import_module(m.name)\n"
+        "print(sorted(k for k in sys.modules if k.split('.')[0] in ('lightning', 'pytorch_lightning')))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
