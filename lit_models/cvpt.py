@@ -49,6 +49,7 @@ class CVPT(L.LightningModule):
         encoder_hidden: int | None = None,
         memory_len: int | None = None,
         dropout: float | None = None,
+        input_downsample: int | None = None,
         tbptt_len: int = 64,
         lr: float = 5e-4,
         weight_decay: float = 1e-4,
@@ -70,6 +71,7 @@ class CVPT(L.LightningModule):
             encoder_hidden: dense layer after the IMPALA stack (None: 256).
             memory_len: TrXL memory and attention span in steps (None: 64).
             dropout: transformer dropout (None: 0).
+            input_downsample: average-pool frames by this factor first (None: 1, the paper's).
             tbptt_len: window of truncated backprop; the sequence is cut into these.
             lr: peak AdamW learning rate (paper: 5e-4 tiny/base, 1e-4 large).
             weight_decay: AdamW decay for weight matrices (norms, biases, embeddings: none).
@@ -93,6 +95,7 @@ class CVPT(L.LightningModule):
             "encoder_hidden": encoder_hidden,
             "memory_len": memory_len,
             "dropout": dropout,
+            "input_downsample": input_downsample,
         }
         self.config = CVPTConfig.from_name(
             model, **{k: v for k, v in overrides.items() if v is not None}

@@ -70,3 +70,14 @@ def test_fit_writes_run_folder_and_resumes_at_the_same_step(
     assert started == [0, 2]
     assert resumed.trainer.global_step == 3
     assert len([p for p in tmp_path.iterdir() if p.name != "export"]) == 2  # resumed run: own folder
+
+
+def test_last_checkpoint_is_the_newest_not_the_best(crafterplay: Path, tmp_path: Path) -> None:
+    # Three validations (every 2 steps); whichever is best, last.ckpt must hold step 6, or a
+    # resume would silently redo the steps after the best one.
+    cli = _fit(crafterplay, tmp_path, 6)
+    (run_dir,) = tmp_path.iterdir()
+    checkpoints = run_dir / "checkpoints"
+    assert torch.load(checkpoints / "last.ckpt", weights_only=True)["global_step"] == 6
+    best = cli.trainer.checkpoint_callbacks[0].best_model_path
+    assert Path(best).parent == checkpoints and Path(best).name.startswith("best-step")

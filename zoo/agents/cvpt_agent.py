@@ -57,7 +57,7 @@ class CVPTPolicy:
         frames = np.asarray(frames)
         if first is None:
             first = np.zeros(len(frames), dtype=bool)
-        frames_t = torch.as_tensor(frames, device=self.device).unsqueeze(1)
+        frames_t = torch.tensor(frames, device=self.device).unsqueeze(1)  # copies: env frames may be read-only
         first_t = torch.as_tensor(np.asarray(first, dtype=bool), device=self.device).unsqueeze(1)
         logits, state = self.model(frames_t, first_t, state)
         return logits[:, 0].float(), state

@@ -40,6 +40,9 @@ class CVPTConfig:
     """Size of the policy head (crafter's 17 actions)."""
     frame_size: int = 144
     """Frames are frame_size x frame_size RGB."""
+    input_downsample: int = 1
+    """Average-pool frames by this factor before the encoder. The paper uses 1 (144 px); 2
+    (72 px, near the 64 px of Crafter's scoreboard agents) trains ~4x faster on a CPU."""
     dropout: float = 0.0
     """Dropout in attention and feed-forward blocks."""
     value_head: bool = False
@@ -88,8 +91,14 @@ class CVPTModel(nn.Module):
     def __init__(self, config: CVPTConfig) -> None:
         super().__init__()
         self.config = config
+        if config.input_downsample < 1 or config.frame_size % config.input_downsample:
+            raise ValueError(
+                f"input_downsample={config.input_downsample} must be >= 1 and divide "
+                f"frame_size={config.frame_size}"
+            )
         self.encoder = ImpalaEncoder(
             frame_size=config.frame_size,
+            downsample=config.input_downsample,
             channels=tuple(config.impala_channels),
             width=config.impala_width,
             hidden=config.encoder_hidden,

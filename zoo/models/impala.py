@@ -38,6 +38,7 @@ class ImpalaEncoder(nn.Module):
 
     Channels are ``channels`` times ``width`` (the paper's "IMPALA width"); the flattened
     feature map goes through a dense ``hidden`` layer and then to ``out_dim`` (the TrXL width).
+    ``downsample`` > 1 average-pools the frames first (cheaper convolutions, fewer features).
     """
 
     def __init__(
@@ -47,11 +48,13 @@ class ImpalaEncoder(nn.Module):
         width: int,
         hidden: int,
         out_dim: int,
+        downsample: int = 1,
     ) -> None:
         super().__init__()
+        self.downsample = downsample
         in_channels = 3
         stages = []
-        size = frame_size
+        size = frame_size // downsample
         for base in channels:
             stages.append(ConvSequence(in_channels, base * width))
             in_channels = base * width
@@ -62,5 +65,7 @@ class ImpalaEncoder(nn.Module):
 
     def forward(self, frames: torch.Tensor) -> torch.Tensor:
         x = frames.float() / 255.0
+        if self.downsample > 1:
+            x = F.avg_pool2d(x, self.downsample)
         x = self.stages(x).flatten(1)
         return self.out(F.relu(self.hidden(F.relu(x))))

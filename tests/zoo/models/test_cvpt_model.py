@@ -59,3 +59,22 @@ def test_value_head_only_when_configured() -> None:
     assert model.value_head(hidden).shape == (1, 2)
     with pytest.raises(RuntimeError, match="value_head=False"):
         CVPTModel(CVPTConfig.from_name("tiny", **SMALL)).value_head(hidden)
+
+
+def test_input_downsample_sees_the_average_pooled_frame() -> None:
+    # A 2x downsampling model on a frame equals the same weights at frame_size 72 on the
+    # 2x2-averaged frame; a factor that does not divide 144 is refused.
+    torch.manual_seed(0)
+    half = CVPTModel(CVPTConfig.from_name("tiny", input_downsample=2, **SMALL)).eval()
+    small = CVPTModel(CVPTConfig.from_name("tiny", frame_size=72, **SMALL)).eval()
+    small.load_state_dict(half.state_dict())
+    frames = torch.randint(0, 4, (1, 2, 72, 72, 3), dtype=torch.uint8) * 64
+    big = frames.repeat_interleave(2, dim=2).repeat_interleave(2, dim=3)  # every 2x2 block equal
+    first = torch.ones(1, 2, dtype=torch.bool)
+    with torch.no_grad():
+        a, _ = half(big, first, half.initial_state(1))
+        b, _ = small(frames, first, small.initial_state(1))
+    torch.testing.assert_close(a, b)
+    assert half.get_num_params() < CVPTModel(CVPTConfig.from_name("tiny", **SMALL)).get_num_params()
+    with pytest.raises(ValueError, match="input_downsample=5 must be >= 1 and divide frame_size=144"):
+        CVPTModel(CVPTConfig.from_name("tiny", input_downsample=5))
