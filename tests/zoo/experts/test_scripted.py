@@ -203,3 +203,17 @@ def test_climbs_the_first_tech_steps_in_craftax(craftax_env):
 def test_plays_original_crafter(crafter_env):
     _, step = _play(crafter_env, [3, 4], 300)
     assert step.state["achievements"][:, Achievement.COLLECT_WOOD].all()
+
+
+@pytest.mark.slow
+def test_scores_above_human_experts_in_craftax(tmp_path):
+    """The issue's bar (Crafter Score >= 50, human experts 50.5) on 20 episodes (~3 min)."""
+    import json
+
+    from zoo.cli import main
+
+    argv = ["eval", "--agent", "scripted", "--env", "craftax", "--episodes", "20", "--seed", "1",
+            "--no-gif", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["crafter_score"]["pooled"] >= 50
