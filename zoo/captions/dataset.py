@@ -86,13 +86,20 @@ def episode_info(episode: dict) -> EpisodeInfo:
 
 
 def find_captions(
-    episodes: Iterable[dict], vocab: Vocabulary, params: RuleParams, progress: bool = False
+    episodes: Iterable[dict],
+    vocab: Vocabulary,
+    params: RuleParams,
+    progress: bool = False,
+    total: int | None = None,
 ) -> tuple[list[EpisodeInfo], CaptionRefs]:
-    """First pass: run every rule on every episode; keep references only."""
+    """First pass: run every rule on every episode; keep references only (``total``: episode
+    count for the progress bar, when known)."""
     rules = all_rules()
     rule_ids = {name: i for i, name in enumerate(vocab.rules())}
     infos, parts, seen = [], [], set()
-    for episode in tqdm(episodes, desc="caption rules", unit="episode", disable=not progress):
+    for episode in tqdm(
+        episodes, total=total, desc="caption rules", unit="episode", disable=not progress
+    ):
         info = episode_info(episode)
         if info.episode in seen:
             raise ValueError(f"episode {info.episode} appears twice in the input")
@@ -194,6 +201,7 @@ def write_caption_dataset(
     params: RuleParams | None = None,
     source: str = "",
     progress: bool = False,
+    num_episodes: int | None = None,
 ) -> dict:
     """Caption the episodes ``episodes()`` yields (called twice, same order) into ``out``.
 
@@ -206,7 +214,7 @@ def write_caption_dataset(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
 
-    infos, refs = find_captions(episodes(), vocab, params, progress)
+    infos, refs = find_captions(episodes(), vocab, params, progress, num_episodes)
     ids = np.array([i.episode for i in infos], np.int64)
     n_test = heldout_count(len(infos), heldout_episodes, heldout_fraction)
     root_seed = np.random.SeedSequence(seed)
@@ -371,4 +379,8 @@ def caption_dataset(src: str | Path, out: str | Path, **kwargs) -> dict:
     urls = list_shards(src)
     if not urls:
         raise ValueError(f"{src}: manifest lists no CrafterPlay shards")
-    return write_caption_dataset(lambda: iter_episodes(urls), out, source=str(src), **kwargs)
+    manifest = json.loads((Path(src) / "manifest.json").read_text())
+    num_episodes = sum(int(shard["episodes"]) for shard in manifest["shards"])
+    return write_caption_dataset(
+        lambda: iter_episodes(urls), out, source=str(src), num_episodes=num_episodes, **kwargs
+    )
