@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import lightning as L
 import pytest
 import torch
 from lightning.pytorch.loggers import WandbLogger
@@ -81,3 +82,30 @@ def test_last_checkpoint_is_the_newest_not_the_best(crafterplay: Path, tmp_path:
     assert torch.load(checkpoints / "last.ckpt", weights_only=True)["global_step"] == 6
     best = cli.trainer.checkpoint_callbacks[0].best_model_path
     assert Path(best).parent == checkpoints and Path(best).name.startswith("best-step")
+
+
+CONFIGS = sorted(
+    p for p in CONFIG.parent.glob("*.yaml") if not p.name.startswith("expert_")  # PPO: own CLI
+)
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=lambda p: p.stem)
+def test_every_shipped_config_parses_and_builds(config: Path) -> None:
+    """Each YAML in configs/ names real arguments and builds its model and datamodule (GPU
+    configs on this machine's CPU: the hardware flags are overridden, every other value is the
+    file's)."""
+    from lit_models.cli import ZooCLI
+    from lightning.pytorch.cli import SaveConfigCallback
+
+    cli = ZooCLI(
+        L.LightningModule, L.LightningDataModule, subclass_mode_model=True,
+        subclass_mode_data=True, save_config_callback=SaveConfigCallback,
+        auto_configure_optimizers=False, run=False,
+        args=[
+            f"--config={config}", "--trainer.logger=false", "--trainer.callbacks=[]",
+            "--trainer.accelerator=cpu", "--trainer.devices=1", "--trainer.strategy=auto",
+            "--trainer.precision=32",
+        ],
+    )
+    assert cli.model.hparams  # save_hyperparameters(): checkpoints rebuild the model alone
+    assert cli.datamodule.hparams["root"].startswith("data/")
