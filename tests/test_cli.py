@@ -32,7 +32,7 @@ def test_bad_arguments_name_the_option(capsys):
     assert "--env: invalid choice: 'minecraft'" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["demo", "--episodes", "0"])
-    assert "--episodes: must be >= 1, got 0" in capsys.readouterr().err
+    assert "--episodes: expected a positive integer, got 0" in capsys.readouterr().err
     assert main([]) == 0  # a bare `zoo` prints the help
 
 

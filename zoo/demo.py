@@ -10,12 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from zoo.argtypes import positive_int
 
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
 
 
 def register(subparsers) -> None:
@@ -27,8 +23,8 @@ def register(subparsers) -> None:
     )
     p.add_argument("--out", type=Path, default=Path("runs/demo"), help="output folder")
     p.add_argument("--env", choices=("craftax", "crafter"), default="craftax", help="game")
-    p.add_argument("--episodes", type=_positive_int, default=4, help="episodes to generate/score")
-    p.add_argument("--max-steps", type=_positive_int, default=1000, help="episode step limit")
+    p.add_argument("--episodes", type=positive_int, default=4, help="episodes to generate/score")
+    p.add_argument("--max-steps", type=positive_int, default=1000, help="episode step limit")
     p.add_argument("--seed", type=int, default=0, help="seed of the data and the evaluation")
     p.set_defaults(handler=run_demo)
 

@@ -10,17 +10,9 @@ import sys
 from pathlib import Path
 
 from zoo.agents import AGENT_NAMES
+from zoo.argtypes import positive_int
 from zoo.envs import ENV_NAMES
 
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
-    return value
 
 
 def _out_dir(text: str) -> Path:
@@ -50,15 +42,15 @@ def register(subparsers) -> None:
     )
     gen.add_argument("--expert", required=True, choices=AGENT_NAMES)
     gen.add_argument("--checkpoint", help="expert checkpoint (needed by --expert ppo)")
-    gen.add_argument("--episodes", required=True, type=_positive_int)
+    gen.add_argument("--episodes", required=True, type=positive_int)
     gen.add_argument("--seed", required=True, type=int)
     gen.add_argument("--out", required=True, type=_out_dir, help="dataset folder")
-    gen.add_argument("--workers", type=_positive_int, default=1, help="shard processes")
+    gen.add_argument("--workers", type=positive_int, default=1, help="shard processes")
     gen.add_argument("--env", choices=ENV_NAMES, default="craftax")
-    gen.add_argument("--episodes-per-shard", type=_positive_int, default=16)
-    gen.add_argument("--chunk-length", type=_positive_int, default=256, help="steps per sample")
-    gen.add_argument("--max-steps", type=_positive_int, default=10_000, help="episode step limit")
-    gen.add_argument("--num-envs", type=_positive_int, default=8, help="episodes played at once")
+    gen.add_argument("--episodes-per-shard", type=positive_int, default=16)
+    gen.add_argument("--chunk-length", type=positive_int, default=256, help="steps per sample")
+    gen.add_argument("--max-steps", type=positive_int, default=10_000, help="episode step limit")
+    gen.add_argument("--num-envs", type=positive_int, default=8, help="episodes played at once")
     gen.add_argument("--no-progress", action="store_true", help="no progress bar")
     gen.set_defaults(handler=_generate, _parser=gen)
 

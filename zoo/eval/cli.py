@@ -10,6 +10,7 @@ from pathlib import Path
 
 import zoo.agents
 from zoo.agents import AGENT_NAMES, make_agent
+from zoo.argtypes import non_negative_int, positive_int
 from zoo.envs import ENV_NAMES
 
 DESCRIPTION = """\
@@ -26,18 +27,6 @@ class UsageError(Exception):
     """Bad arguments found after parsing; reported as ``zoo eval: error: ...`` with exit code 2."""
 
 
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
-
-
-def _non_negative_int(text: str) -> int:
-    value = int(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
 
 
 def register(subparsers) -> None:
@@ -51,17 +40,17 @@ def register(subparsers) -> None:
     p.add_argument("--agent", choices=AGENT_NAMES, help="who plays (from zoo.agents.AGENT_NAMES)")
     p.add_argument("--checkpoint", type=Path, help="checkpoint of a trained agent (e.g. ppo)")
     p.add_argument("--env", choices=ENV_NAMES, required=True, help="game to play in")
-    p.add_argument("--episodes", type=_positive_int, default=100, help="episodes (default 100)")
-    p.add_argument("--seed", type=_non_negative_int, default=0, help="run seed (default 0)")
+    p.add_argument("--episodes", type=positive_int, default=100, help="episodes (default 100)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="run seed (default 0)")
     p.add_argument(
         "--out", type=Path,
         help="output directory (default runs/eval/<agent>-<env>-<UTC time>)",
     )
     p.add_argument(
-        "--num-envs", type=_positive_int, default=8, help="envs played at once (default 8)"
+        "--num-envs", type=positive_int, default=8, help="envs played at once (default 8)"
     )
     p.add_argument(
-        "--max-steps", type=_positive_int, default=10_000, help="episode step limit (default 10000)"
+        "--max-steps", type=positive_int, default=10_000, help="episode step limit (default 10000)"
     )
     p.add_argument("--no-gif", action="store_true", help="skip episode.gif")
     p.add_argument("--overwrite", action="store_true", help="replace a report already in --out")

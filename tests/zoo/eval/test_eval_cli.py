@@ -39,10 +39,10 @@ def test_rerun_needs_overwrite_and_no_gif_skips_the_gif(tmp_path, capsys):
 @pytest.mark.parametrize(
     "change, message",
     [
-        (["--episodes", "0"], "argument --episodes: must be >= 1, got 0"),
+        (["--episodes", "0"], "argument --episodes: expected a positive integer, got 0"),
         (["--env", "minecraft"], "argument --env: invalid choice: 'minecraft'"),
         (["--agent", "alphago"], "argument --agent: invalid choice: 'alphago'"),
-        (["--seed", "-1"], "argument --seed: must be >= 0"),
+        (["--seed", "-1"], "argument --seed: expected an integer >= 0, got -1"),
     ],
 )
 def test_bad_arguments_are_rejected_by_the_parser(tmp_path, capsys, change, message):
