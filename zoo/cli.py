@@ -17,6 +17,7 @@ TOP_LEVEL = (
     ("zoo.data.cli", "register"),
     ("zoo.eval.cli", "register"),
     ("zoo.eval.curves", "register"),
+    ("zoo.eval.compare", "register"),
     ("zoo.captions.cli", "register"),
     ("zoo.experts.cli", "register"),
     ("zoo.export_cli", "register"),
