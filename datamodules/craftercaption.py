@@ -166,5 +166,9 @@ class CrafterCaptionDataModule(L.LightningDataModule):
     def test_dataloader(self) -> DataLoader:
         return self._loader(self.hparams.test_split, train=False)
 
+    def predict_dataloader(self) -> DataLoader:
+        """``zoo predict`` embeds the test split's clips, in order."""
+        return self._loader(self.hparams.test_split, train=False)
+
 
 __all__ = ["CrafterCaptionDataModule", "SeededShuffle", "collate_clips", "check_manifest_captions"]

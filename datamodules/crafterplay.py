@@ -27,7 +27,7 @@ from torch.utils.data import DataLoader
 from zoo.data.reader import decode_sample, filter_noops, list_shards
 
 SPLITS = ("train", "val", "test")
-SEQUENCE_KEYS = ("frames", "actions", "first", "episode")
+SEQUENCE_KEYS = ("frames", "actions", "first", "episode", "step")
 
 
 def episode_split(episode: int, val_fraction: float, test_fraction: float, salt: int = 0) -> str:
@@ -76,6 +76,8 @@ def pack_sequences(chunks: Iterable[dict], seq_len: int) -> Iterator[dict]:
         pending["actions"].append(np.asarray(chunk["actions"], dtype=np.int64))
         pending["first"].append(first)
         pending["episode"].append(np.full(n, episode, dtype=np.int64))
+        in_chunk = chunk.get("step_index", np.arange(n))  # filtered chunks say which steps stayed
+        pending["step"].append(int(chunk["meta"]["offset"]) + np.asarray(in_chunk, np.int64))
         size += n
         while size >= seq_len:
             joined = {key: np.concatenate(parts) for key, parts in pending.items()}
@@ -183,6 +185,10 @@ class CrafterPlayDataModule(L.LightningDataModule):
         return self._loader("val")
 
     def test_dataloader(self) -> DataLoader:
+        return self._loader("test")
+
+    def predict_dataloader(self) -> DataLoader:
+        """``zoo predict`` reads the test episodes, in order."""
         return self._loader("test")
 
 

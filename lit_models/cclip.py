@@ -191,6 +191,14 @@ class CCLIP(L.LightningModule):
     def on_test_epoch_end(self) -> None:
         self._log_retrieval("test")
 
+    def predict_step(self, batch: dict, batch_idx: int) -> dict[str, torch.Tensor]:
+        """Unit-norm video embeddings of the clips with their caption and source step, for
+        retrieval or probing outside Lightning (``zoo predict`` writes these)."""
+        return {
+            "video_embedding": self.model.encode_video(batch["frames"]).float(),
+            "caption_id": batch["caption_id"], "episode": batch["episode"], "step": batch["step"],
+        }
+
     def parameter_groups(self) -> list[dict]:
         """AdamW groups: lr scale per tower layer (layer decay x pretrained multiplier), no decay
         on 1-D parameters (norms, biases, class/CLS tokens, logit scale, adapter gate)."""

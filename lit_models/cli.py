@@ -15,6 +15,8 @@ import yaml
 from lightning.pytorch.cli import LightningCLI, SaveConfigCallback
 from lightning.pytorch.loggers import WandbLogger
 
+from lit_models.prediction_writer import NpzPredictionWriter
+
 
 class WandbSaveConfigCallback(SaveConfigCallback):
     """Writes config.yaml (as usual) and also logs the full config to W&B on rank 0."""
@@ -52,7 +54,9 @@ class ZooCLI(LightningCLI):
 
 
 def run_lightning_cli(argv: list[str]) -> LightningCLI:
-    """Run ``zoo fit|validate|test|predict ARGS`` (argv starts with the verb)."""
+    """Run ``zoo fit|validate|test|predict ARGS`` (argv starts with the verb); ``predict``
+    writes its outputs to ``<run dir>/predictions/*.npz``."""
+    predicting = bool(argv) and argv[0] == "predict"
     cli = ZooCLI(
         L.LightningModule,
         L.LightningDataModule,
@@ -61,6 +65,7 @@ def run_lightning_cli(argv: list[str]) -> LightningCLI:
         save_config_callback=WandbSaveConfigCallback,
         save_config_kwargs={"overwrite": True},
         auto_configure_optimizers=False,
+        trainer_defaults={"callbacks": [NpzPredictionWriter()]} if predicting else None,
         args=argv,
         run=True,
     )

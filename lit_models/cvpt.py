@@ -158,6 +158,15 @@ class CVPT(L.LightningModule):
     def test_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> None:
         self._eval_step(batch, "test", self.test_metrics)
 
+    def predict_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> dict[str, torch.Tensor]:
+        """Per step: the expert's action, the policy's distribution and its most likely action,
+        with the episode and step they belong to (``zoo predict`` writes these)."""
+        probs = torch.softmax(self(batch["frames"], batch["first"]).float(), dim=-1)
+        return {
+            "episode": batch["episode"], "step": batch["step"], "action": batch["actions"],
+            "predicted": probs.argmax(-1), "probs": probs,
+        }
+
     def configure_optimizers(self):
         decay, no_decay = [], []
         for module in self.model.modules():

@@ -109,3 +109,30 @@ def test_every_shipped_config_parses_and_builds(config: Path) -> None:
     )
     assert cli.model.hparams  # save_hyperparameters(): checkpoints rebuild the model alone
     assert cli.datamodule.hparams["root"].startswith("data/")
+
+
+def test_predict_writes_the_test_episodes_actions_and_distributions(crafterplay: Path, tmp_path: Path) -> None:
+    import numpy as np
+
+    from datamodules.crafterplay import episode_split
+
+    _fit(crafterplay, tmp_path / "fit", 2)
+    (run_dir,) = (tmp_path / "fit").iterdir()
+    cli = run_lightning_cli([
+        "predict", f"--config={CONFIG}", f"--trainer.default_root_dir={tmp_path / 'predict'}",
+        "--trainer.enable_progress_bar=false", f"--data.init_args.root={crafterplay}",
+        "--data.init_args.seq_len=8", "--data.init_args.batch_size=2",
+        "--data.init_args.num_workers=0", "--data.init_args.test_fraction=0.5",
+        "--data.init_args.val_fraction=0.3", "--model.init_args.tbptt_len=4",
+        "--model.init_args.memory_len=4", f"--ckpt_path={run_dir / 'checkpoints' / 'last.ckpt'}",
+    ])
+    files = sorted(Path(cli.trainer.default_root_dir, "predictions").glob("batch-0-*.npz"))
+    assert files
+    for file in files:
+        with np.load(file, allow_pickle=False) as pred:
+            b, s = pred["action"].shape
+            assert pred["probs"].shape == (b, s, 17) and pred["probs"].dtype == np.float32
+            np.testing.assert_allclose(pred["probs"].sum(-1), 1.0, rtol=1e-5)
+            assert np.array_equal(pred["predicted"], pred["probs"].argmax(-1))
+            assert pred["step"].dtype == np.int64 and (pred["step"] >= 0).all()
+            assert {episode_split(e, 0.3, 0.5) for e in pred["episode"].ravel()} == {"test"}

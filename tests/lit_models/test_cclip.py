@@ -179,3 +179,24 @@ def test_smoke_config_runs_through_the_lightning_cli(caption_root, tmp_path, mon
     assert "val/R@1" in cli.trainer.callback_metrics
     (run_dir,) = [p for p in tmp_path.iterdir() if (p / "config.yaml").exists()]
     assert list((run_dir / "checkpoints").glob("*.ckpt"))
+
+    # zoo predict: the held-out clips' embeddings, matching the model and the clips' captions
+    last = run_dir / "checkpoints" / "last.ckpt"
+    predicted = run_lightning_cli(
+        [
+            "predict", "--config", str(REPO / "configs" / "cclip_smoke.yaml"),
+            f"--trainer.default_root_dir={tmp_path / 'predict'}",
+            "--trainer.enable_progress_bar=false", f"--data.init_args.root={caption_root}",
+            "--data.init_args.num_workers=0", "--data.init_args.eval_batch_size=4",
+            f"--ckpt_path={last}",
+        ]
+    )  # fmt: skip
+    files = sorted(Path(predicted.trainer.default_root_dir, "predictions").glob("*.npz"))
+    first_batch = next(iter(predicted.datamodule.predict_dataloader()))
+    with np.load(files[0], allow_pickle=False) as pred:
+        assert pred["video_embedding"].shape == (4, predicted.model.config.embed_dim)
+        np.testing.assert_allclose(np.linalg.norm(pred["video_embedding"], axis=-1), 1.0, rtol=1e-5)
+        assert np.array_equal(pred["caption_id"], first_batch["caption_id"].numpy())
+        with torch.no_grad():
+            expected = predicted.model.model.encode_video(first_batch["frames"]).numpy()
+        np.testing.assert_allclose(pred["video_embedding"], expected, rtol=1e-4, atol=1e-5)
