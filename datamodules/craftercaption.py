@@ -23,6 +23,7 @@ import lightning as L
 import numpy as np
 import torch
 import webdataset as wds
+from lightning.pytorch.utilities import rank_zero_warn
 from torch.utils.data import DataLoader
 
 from zoo.captions.dataset import decode_caption_sample, list_caption_shards
@@ -99,7 +100,7 @@ class CrafterCaptionDataModule(L.LightningDataModule):
         shuffle_buffer: int = 2000,
         train_batches_per_epoch: int | None = None,
         train_split: str = "train",
-        val_split: str = "test",
+        val_split: str | None = None,
         test_split: str = "test",
         pin_memory: bool = True,
     ) -> None:
@@ -112,7 +113,9 @@ class CrafterCaptionDataModule(L.LightningDataModule):
             train_batches_per_epoch: epoch length in batches over all workers (the stream repeats
                 to fill it); None: one pass over the training shards.
             train_split: manifest split to train on.
-            val_split: manifest split to validate on (the held-out episodes).
+            val_split: manifest split to validate on; None: "val" when the manifest has one
+                (``zoo data caption --val-episodes``), else the test split (with a warning:
+                a best-by-validation checkpoint is then chosen on the test episodes).
             test_split: manifest split to test on (the held-out episodes).
             pin_memory: page-locked batches for faster host-to-GPU copies.
         """
@@ -160,8 +163,23 @@ class CrafterCaptionDataModule(L.LightningDataModule):
     def train_dataloader(self) -> DataLoader:
         return self._loader(self.hparams.train_split, train=True)
 
+    @property
+    def val_split(self) -> str:
+        """The split validation reads (see ``val_split`` in ``__init__``)."""
+        if self.hparams.val_split is not None:
+            return self.hparams.val_split
+        manifest = json.loads((Path(self.hparams.root) / "manifest.json").read_text())
+        if "val" in manifest["splits"]:
+            return "val"
+        rank_zero_warn(
+            f"{self.hparams.root} has no val split: validating on {self.hparams.test_split!r}, so "
+            "a checkpoint chosen by validation is chosen on the test episodes "
+            "(make one with zoo data caption --val-episodes N)"
+        )
+        return self.hparams.test_split
+
     def val_dataloader(self) -> DataLoader:
-        return self._loader(self.hparams.val_split, train=False)
+        return self._loader(self.val_split, train=False)
 
     def test_dataloader(self) -> DataLoader:
         return self._loader(self.hparams.test_split, train=False)

@@ -120,3 +120,14 @@ def test_manifest_with_other_captions_is_rejected(tmp_path):
         module.train_dataloader()
     with pytest.raises(FileNotFoundError, match="manifest.json"):
         CrafterCaptionDataModule(str(tmp_path / "nowhere"), num_workers=0).train_dataloader()
+
+
+def test_validation_reads_the_val_split_when_there_is_one(caption_root, tmp_path):
+    with_val = tmp_path / "with_val"
+    write_fake_craftercaption(with_val, {"train": [4], "val": [3], "test": [5]})
+    module = CrafterCaptionDataModule(str(with_val), eval_batch_size=8, num_workers=0)
+    assert module.val_split == "val"
+    assert len(clip_numbers(module.val_dataloader())) == 3
+    without = CrafterCaptionDataModule(str(caption_root), num_workers=0)
+    with pytest.warns(UserWarning, match="no val split: validating on 'test'"):
+        assert without.val_split == "test"

@@ -118,7 +118,8 @@ def _caption(args: argparse.Namespace) -> int:
 
     manifest = caption_dataset(
         args.src, args.out, seed=args.seed, balance=args.balance, per_rule=args.per_rule,
-        heldout_episodes=args.heldout_episodes, per_shard=args.per_shard, progress=True,
+        heldout_episodes=args.heldout_episodes, val_episodes=args.val_episodes,
+        per_shard=args.per_shard, progress=True,
     )
     sizes = {s: m["samples"] for s, m in manifest["splits"].items()}
     print(f"wrote {sizes} clip-caption pairs to {args.out}")
@@ -180,5 +181,8 @@ def register_data_commands(data_subparsers: argparse._SubParsersAction) -> None:
     cap.add_argument("--heldout-episodes", type=int, default=1000,
                      help="episodes held out for the test split (paper: 1000); with fewer "
                      "episodes in the input, 5%% of them (at least one)")
+    cap.add_argument("--val-episodes", type=int, default=0,
+                     help="other episodes for a validation split that picks checkpoints, so the "
+                     "test split is only scored (default 0: no val split)")
     cap.add_argument("--per-shard", type=int, default=1000, help="clips per shard")
     cap.set_defaults(handler=_caption)

@@ -32,7 +32,7 @@ from zoo.captions.balance import balance_indices, count_by
 from zoo.captions.rules import EpisodeView, RuleParams, all_rules, scan_episode
 from zoo.captions.vocabulary import Caption, Vocabulary, load_vocabulary
 
-SPLITS = ("train", "test")
+SPLITS = ("train", "val", "test")  # "val" only when val_episodes > 0
 FORMAT_VERSION = 1
 ZSTD_LEVEL = 3
 
@@ -197,6 +197,7 @@ def write_caption_dataset(
     per_rule: int | None = None,
     heldout_episodes: int = 1000,
     heldout_fraction: float = 0.05,
+    val_episodes: int = 0,
     per_shard: int = 1000,
     params: RuleParams | None = None,
     source: str = "",
@@ -205,6 +206,8 @@ def write_caption_dataset(
 ) -> dict:
     """Caption the episodes ``episodes()`` yields (called twice, same order) into ``out``.
 
+    ``heldout_episodes`` episodes form the test split; ``val_episodes`` others, if > 0, a
+    validation split for checkpoint selection (so the test split is never used for choosing).
     Returns the manifest (also written to out/manifest.json).
     """
     if per_shard < 1:
@@ -214,29 +217,42 @@ def write_caption_dataset(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
 
+    if val_episodes < 0:
+        raise ValueError(f"--val-episodes must be >= 0, got {val_episodes}")
     infos, refs = find_captions(episodes(), vocab, params, progress, num_episodes)
     ids = np.array([i.episode for i in infos], np.int64)
     n_test = heldout_count(len(infos), heldout_episodes, heldout_fraction)
-    root_seed = np.random.SeedSequence(seed)
-    split_seed, *balance_seeds = root_seed.spawn(1 + len(SPLITS))
-    test_ids = np.sort(np.random.default_rng(split_seed).permutation(ids)[:n_test])
-    in_test = np.isin(refs.episode, test_ids)
+    if val_episodes and n_test + val_episodes >= len(ids):
+        raise ValueError(
+            f"--val-episodes {val_episodes} with {n_test} test episodes leaves no training "
+            f"episode of {len(ids)}"
+        )
+    # Child seeds in a fixed order (split, train, test, val): adding val changes no other split.
+    split_seed, *balance_seeds = np.random.SeedSequence(seed).spawn(4)
+    order = np.random.default_rng(split_seed).permutation(ids)
+    split_ids = {
+        "test": np.sort(order[:n_test]),
+        "val": np.sort(order[n_test : n_test + val_episodes]),
+    }
+    split_ids["train"] = np.setdiff1d(ids, np.concatenate(list(split_ids.values())))
+    splits = [s for s in SPLITS if len(split_ids[s])]
+    split_seeds = dict(zip(("train", "test", "val"), balance_seeds))
 
     caption_names, rule_names = vocab.texts(), vocab.rules()
     kept: dict[str, CaptionRefs] = {}
     split_meta: dict[str, dict] = {}
-    for split, mask, bseed in zip(SPLITS, (~in_test, in_test), balance_seeds):
-        part = refs.take(np.flatnonzero(mask))
+    for split in splits:
+        part = refs.take(np.flatnonzero(np.isin(refs.episode, split_ids[split])))
+        bseed = split_seeds[split]
         chosen = part.take(balance_indices(part.rule, part.caption, bseed, balance, per_rule))
         if len(chosen) == 0:
-            which = f"{n_test} held-out episodes" if split == "test" else "training episodes"
             raise ValueError(
-                f"the {split} split is empty: its {which} fired no caption rule; "
-                "generate longer or more episodes"
+                f"the {split} split is empty: its {len(split_ids[split])} episodes fired no "
+                "caption rule; generate longer or more episodes"
             )
         kept[split] = chosen
         split_meta[split] = {
-            "episodes": int(len(ids) - n_test if split == "train" else n_test),
+            "episodes": int(len(split_ids[split])),
             "samples": len(chosen),
             "counts_before": {
                 "rules": count_by(rule_names, part.rule),
@@ -256,14 +272,15 @@ def write_caption_dataset(
         "per_shard": per_shard,
         "rule_params": asdict(params),
         "episodes": ids.tolist(),
-        "heldout": test_ids.tolist(),
-        "samples": {s: len(kept[s]) for s in SPLITS},
-        "selection_sha1": {s: kept[s].digest() for s in SPLITS},
+        "heldout": split_ids["test"].tolist(),
+        **({"val_episodes": split_ids["val"].tolist()} if val_episodes else {}),
+        "samples": {s: len(kept[s]) for s in splits},
+        "selection_sha1": {s: kept[s].digest() for s in splits},
     }
     _check_plan(out / "plan.json", plan)
 
     shards = _write_shards(episodes, infos, kept, vocab, out, per_shard, params.history, progress)
-    for split in SPLITS:
+    for split in splits:
         split_meta[split]["shards"] = shards[split]
     manifest = {
         "dataset": "craftercaption",
@@ -314,10 +331,11 @@ def _write_shards(
     """
     seen = {i.episode for i in infos}
     compressor = zstandard.ZstdCompressor(level=ZSTD_LEVEL)
-    shards: dict[str, list[dict]] = {s: [] for s in SPLITS}
-    buffers: dict[str, list] = {s: [] for s in SPLITS}
-    order = {s: np.lexsort((kept[s].caption, kept[s].step, kept[s].episode)) for s in SPLITS}
-    cursor = {s: 0 for s in SPLITS}
+    splits = list(kept)
+    shards: dict[str, list[dict]] = {s: [] for s in splits}
+    buffers: dict[str, list] = {s: [] for s in splits}
+    order = {s: np.lexsort((kept[s].caption, kept[s].step, kept[s].episode)) for s in splits}
+    cursor = {s: 0 for s in splits}
 
     def shard_path(split: str) -> Path:
         return out / _shard_name(split, len(shards[split]))
@@ -335,7 +353,7 @@ def _write_shards(
         if info.episode not in seen:
             raise ValueError(f"episode {info.episode} was not in the first pass over the input")
         frames = np.asarray(episode["frames"])
-        for split in SPLITS:
+        for split in splits:
             refs, idx = kept[split], order[split]
             while cursor[split] < len(idx) and refs.episode[idx[cursor[split]]] == info.episode:
                 row = idx[cursor[split]]
@@ -348,7 +366,7 @@ def _write_shards(
                     buffers[split].append(None)
                 if len(buffers[split]) == per_shard:
                     flush(split)
-    for split in SPLITS:
+    for split in splits:
         if buffers[split]:
             flush(split)
         if cursor[split] != len(order[split]):

@@ -118,3 +118,23 @@ def test_single_episode_input_is_an_error(play, tmp_path):
     episode = next(iter_episodes(list_shards(play)))
     with pytest.raises(ValueError, match="at least 2 episodes"):
         write_caption_dataset(lambda: [episode], tmp_path)
+
+
+def test_val_split_holds_other_episodes_and_leaves_the_test_split_as_it_was(play, captioned, tmp_path):
+    argv = ["data", "caption", "--src", str(play), "--out", str(tmp_path), "--seed", "0",
+            "--per-shard", "3", "--val-episodes", "1"]
+    assert main(argv) == 0
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert sorted(manifest["splits"]) == ["test", "train", "val"]
+    episodes = {split: {s["episode"] for s in read_split(tmp_path, split)} for split in manifest["splits"]}
+    assert episodes["val"] == set(manifest["val_episodes"]) and len(manifest["val_episodes"]) == 1
+    assert not episodes["val"] & (episodes["train"] | episodes["test"])
+    test_shards = sorted(tmp_path.glob("test-*.tar"))
+    assert [p.read_bytes() for p in test_shards] == [
+        p.read_bytes() for p in sorted(captioned.glob("test-*.tar"))
+    ]
+
+
+def test_val_split_may_not_take_every_training_episode(play, tmp_path):
+    with pytest.raises(ValueError, match="leaves no training episode"):
+        caption_dataset(play, tmp_path, heldout_episodes=1, val_episodes=2)
