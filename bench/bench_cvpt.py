@@ -12,6 +12,7 @@ Measures:
   zoo data generate --expert random --env crafter --episodes 16 --max-steps 200 --seed 0 \
       --episodes-per-shard 4 --chunk-length 64 --out data/crafterplay_smoke
   nice -n 10 .venv/bin/python bench/bench_cvpt.py --data data/crafterplay_smoke
+  (or --data data/crafterplay_scripted, the scripted-expert set of configs/cvpt_tiny_cpu.yaml)
 """
 
 from __future__ import annotations
@@ -52,9 +53,13 @@ def loader_frames_per_s(root: str, seq_len: int, batch_size: int, min_frames: in
             "samples_per_s": frames / seq_len / seconds, "workers": 0, "noop_filter": True}
 
 
-def train_step_seconds(batch_size: int, seq_len: int, tbptt: int, steps: int) -> dict:
+def train_step_seconds(
+    batch_size: int, seq_len: int, tbptt: int, steps: int, input_downsample: int = 1
+) -> dict:
     torch.manual_seed(0)
-    module = CVPT(model="tiny", tbptt_len=tbptt, cosine_steps=100)
+    module = CVPT(
+        model="tiny", tbptt_len=tbptt, cosine_steps=100, input_downsample=input_downsample
+    )
     optimizer = module.configure_optimizers()["optimizer"]
     frames = torch.randint(0, 256, (batch_size, seq_len, 144, 144, 3), dtype=torch.uint8)
     actions = torch.randint(0, 17, (batch_size, seq_len))
@@ -71,7 +76,8 @@ def train_step_seconds(batch_size: int, seq_len: int, tbptt: int, steps: int) ->
         times.append(time.perf_counter() - start)
     seconds = float(np.median(times[1:]))
     frames_per_step = batch_size * seq_len
-    return {"batch": batch_size, "seq_len": seq_len, "tbptt": tbptt, "seconds": seconds,
+    return {"batch": batch_size, "seq_len": seq_len, "tbptt": tbptt,
+            "input_downsample": input_downsample, "seconds": seconds,
             "frames_per_step": frames_per_step, "frames_per_s": frames_per_step / seconds}
 
 
@@ -126,6 +132,9 @@ def main() -> None:
         return
 
     step = train_step_seconds(batch_size=2, seq_len=64, tbptt=64, steps=2)
+    # configs/cvpt_tiny_cpu.yaml: frames pooled to 72 px, so the step is cheaper and the
+    # loader's share larger
+    step_72 = train_step_seconds(batch_size=2, seq_len=64, tbptt=64, steps=2, input_downsample=2)
     loader = loader_frames_per_s(args.data, seq_len=64, batch_size=2, min_frames=4 * step["frames_per_step"])
     loader_seconds_per_step = step["frames_per_step"] / loader["frames_per_s"]
     presets = {}
@@ -139,8 +148,10 @@ def main() -> None:
                     "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
                     "load_avg_1m": os.getloadavg()[0]},
         "train_step_tiny": step,
+        "train_step_tiny_72px": step_72,
         "datamodule": loader,
         "loader_share_of_step": loader_seconds_per_step / step["seconds"],
+        "loader_share_of_step_72px": loader_seconds_per_step / step_72["seconds"],
         "inference_tiny": cached_vs_recompute(steps=30, num_envs=1),
         "presets": presets,
     }
