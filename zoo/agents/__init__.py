@@ -9,8 +9,17 @@ from zoo.agents.base import Agent, RandomAgent
 AGENT_NAMES = ("random", "scripted", "ppo", "cvpt")
 
 
-def make_agent(name: str, num_envs: int, checkpoint: str | None = None) -> Agent:
-    """Build the named agent for ``num_envs`` envs; ``checkpoint`` is required by trained ones."""
+def make_agent(
+    name: str, num_envs: int, checkpoint: str | None = None, temperature: float = 1.0
+) -> Agent:
+    """Build the named agent for ``num_envs`` envs; ``checkpoint`` is required by trained ones.
+
+    ``temperature`` scales a sampling policy's logits (C-VPT); 0 plays the most likely action.
+    """
+    if temperature < 0:
+        raise ValueError(f"temperature must be >= 0, got {temperature}")
+    if temperature != 1.0 and name != "cvpt":
+        raise ValueError(f"temperature applies to the cvpt agent only, not {name!r}")
     if name == "random":
         return RandomAgent(num_envs)
     if name == "scripted":
@@ -27,7 +36,10 @@ def make_agent(name: str, num_envs: int, checkpoint: str | None = None) -> Agent
     if name == "cvpt":
         from zoo.agents.cvpt_agent import CVPTAgent
 
-        return CVPTAgent.from_checkpoint(checkpoint, num_envs)
+        greedy = temperature == 0
+        return CVPTAgent.from_checkpoint(
+            checkpoint, num_envs, temperature=1.0 if greedy else temperature, greedy=greedy
+        )
     raise ValueError(f"unknown agent {name!r}; expected one of {AGENT_NAMES}")
 
 
@@ -51,9 +63,9 @@ def checkpoint_kind(path: str | Path) -> str:
     )
 
 
-def load_checkpoint_agent(path: str | Path, num_envs: int) -> Agent:
+def load_checkpoint_agent(path: str | Path, num_envs: int, temperature: float = 1.0) -> Agent:
     """The trained agent stored at ``path`` (see ``checkpoint_kind``), for ``num_envs`` envs."""
-    return make_agent(checkpoint_kind(path), num_envs, str(path))
+    return make_agent(checkpoint_kind(path), num_envs, str(path), temperature)
 
 
 __all__ = [

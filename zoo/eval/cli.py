@@ -8,8 +8,7 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-import zoo.agents
-from zoo.agents import AGENT_NAMES, make_agent
+from zoo.agents import AGENT_NAMES, load_checkpoint_agent, make_agent
 from zoo.argtypes import non_negative_int, positive_int
 from zoo.envs import ENV_NAMES
 
@@ -52,6 +51,10 @@ def register(subparsers) -> None:
     p.add_argument(
         "--max-steps", type=positive_int, default=10_000, help="episode step limit (default 10000)"
     )
+    p.add_argument(
+        "--temperature", type=float, default=1.0,
+        help="C-VPT: sample from softmax(logits / T) (default 1); 0 plays the most likely action",
+    )
     p.add_argument("--no-gif", action="store_true", help="skip episode.gif")
     p.add_argument("--overwrite", action="store_true", help="replace a report already in --out")
     p.set_defaults(handler=run_eval)
@@ -65,18 +68,17 @@ def _check_out(out: Path, overwrite: bool) -> None:
 
 
 def _build_agent(args: argparse.Namespace, num_envs: int):
-    """The agent named by --agent, or, with only --checkpoint, ``zoo.agents.load_checkpoint_agent``
-    when the model zoo provides one (trained policies such as C-VPT plug in there)."""
+    """The agent named by --agent, or, with only --checkpoint, the one the checkpoint holds
+    (``zoo.agents.load_checkpoint_agent``: C-VPT or PPO)."""
     if args.checkpoint is not None and not args.checkpoint.exists():
         raise UsageError(f"--checkpoint {args.checkpoint} does not exist")
-    if args.agent is None:
-        loader = getattr(zoo.agents, "load_checkpoint_agent", None)
-        if args.checkpoint is None or loader is None:
-            raise UsageError(f"--agent is required (one of {', '.join(AGENT_NAMES)})")
-        return loader(str(args.checkpoint), num_envs)
     checkpoint = None if args.checkpoint is None else str(args.checkpoint)
     try:
-        return make_agent(args.agent, num_envs, checkpoint)
+        if args.agent is None:
+            if checkpoint is None:
+                raise UsageError(f"--agent is required (one of {', '.join(AGENT_NAMES)})")
+            return load_checkpoint_agent(checkpoint, num_envs, args.temperature)
+        return make_agent(args.agent, num_envs, checkpoint, args.temperature)
     except ValueError as err:
         raise UsageError(str(err)) from None
     except ImportError as err:
@@ -110,6 +112,7 @@ def run_eval(args: argparse.Namespace) -> int:
         "env": args.env,
         "agent": args.agent or getattr(agent, "name", "checkpoint"),
         "checkpoint": None if args.checkpoint is None else str(args.checkpoint),
+        "temperature": args.temperature,
         "seed": args.seed,
         "num_envs": num_envs,
         "max_steps": args.max_steps,

@@ -144,6 +144,16 @@ def test_zoo_eval_plays_a_checkpoint_without_agent_name(checkpoint, tmp_path: Pa
     assert report["agent"] == "cvpt" and report["episodes"] == 2
 
 
+def test_temperature_zero_plays_the_most_likely_action(checkpoint) -> None:
+    from zoo.agents import load_checkpoint_agent
+
+    path, _ = checkpoint
+    greedy = load_checkpoint_agent(path, 2, temperature=0)
+    assert greedy.policy.greedy
+    cool = load_checkpoint_agent(path, 2, temperature=0.5)
+    assert (cool.policy.greedy, cool.policy.temperature) == (False, 0.5)
+
+
 def test_plain_act_from_initial_state_needs_no_flags(checkpoint) -> None:
     policy = CVPTPolicy.load(checkpoint[0], greedy=True)
     frames = _frames(2, 2)

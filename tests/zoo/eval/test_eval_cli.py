@@ -83,3 +83,10 @@ def test_eval_in_craftax(tmp_path):
                  "--num-envs", "2", "--out", str(tmp_path)]) == 0
     report = json.loads((tmp_path / "report.json").read_text())
     assert report["env"] == "craftax" and report["episodes"] == 4
+
+
+def test_temperature_is_only_for_sampling_policies(tmp_path, capsys):
+    assert main(eval_args(tmp_path / "run", "--temperature", "0.5")) == 2
+    assert "temperature applies to the cvpt agent only, not 'random'" in capsys.readouterr().err
+    assert main(eval_args(tmp_path / "run", "--temperature", "-1")) == 2
+    assert "temperature must be >= 0" in capsys.readouterr().err
