@@ -1,13 +1,15 @@
 """C-VPT speed and memory on this machine (CPU) -> bench/results/cvpt.json.
 
 Measures:
-  * CrafterPlayDataModule alone (decode + noop filter + pack + batch, one process) in
-    frames/s, against one tiny-model training step (model only, frames in memory); the
-    loader's share is its time to produce one step's frames over the step's time (goal <= 10%);
+  * training throughput of the tiny model fed by CrafterPlayDataModule (DataLoader workers
+    decoding, filtering and packing in parallel) against the same steps on a batch already in
+    memory; the loader's overhead is the extra time per step (goal <= 10%), at 144 px (the
+    paper's input) and at 72 px (configs/cvpt_tiny_cpu.yaml, where the step is ~5x cheaper);
+  * the datamodule alone (one process) in frames/s;
   * cached per-step inference (rolling TrXL memory) against recomputing the whole window of
     memory_len + 1 frames every step (goal >= 5x);
-  * parameters and peak RSS of a no-grad forward of one sequence per preset (each preset in a
-    fresh process, so peaks do not mix); large is forwarded, not trained.
+  * parameters and peak resident memory of one training step (forward + backward + AdamW) per
+    preset, each in a fresh process whose peak is reset after the imports (Linux clear_refs).
 
   zoo data generate --expert random --env crafter --episodes 16 --max-steps 200 --seed 0 \
       --episodes-per-shard 4 --chunk-length 64 --out data/crafterplay_smoke
@@ -21,7 +23,6 @@ import argparse
 import json
 import os
 import platform
-import resource
 import subprocess
 import sys
 import time
@@ -38,47 +39,59 @@ from zoo.models.cvpt import CVPTConfig, CVPTModel
 RESULTS = Path(__file__).parent / "results" / "cvpt.json"
 
 
-def loader_frames_per_s(root: str, seq_len: int, batch_size: int, min_frames: int) -> dict:
-    module = CrafterPlayDataModule(
-        root, seq_len=seq_len, batch_size=batch_size, num_workers=0, val_fraction=0.0,
-        test_fraction=0.0, train_batches_per_epoch=10**6,
+def _datamodule(root: str, seq_len: int, batch_size: int, workers: int) -> CrafterPlayDataModule:
+    return CrafterPlayDataModule(
+        root, seq_len=seq_len, batch_size=batch_size, num_workers=workers, val_fraction=0.0,
+        test_fraction=0.0, train_batches_per_epoch=10**6, pin_memory=False,
     )
+
+
+def loader_frames_per_s(root: str, seq_len: int, batch_size: int, min_frames: int) -> dict:
+    """The datamodule alone in this process: decode + noop filter + pack + batch."""
     frames, start = 0, time.perf_counter()
-    for batch in module.dataset("train"):
+    for batch in _datamodule(root, seq_len, batch_size, 0).dataset("train"):
         frames += batch["frames"].shape[0] * batch["frames"].shape[1]
         if frames >= min_frames:
             break
     seconds = time.perf_counter() - start
     return {"frames": frames, "seconds": seconds, "frames_per_s": frames / seconds,
-            "samples_per_s": frames / seq_len / seconds, "workers": 0, "noop_filter": True}
+            "workers": 0, "noop_filter": True}
 
 
-def train_step_seconds(
-    batch_size: int, seq_len: int, tbptt: int, steps: int, input_downsample: int = 1
+def training_throughput(
+    root: str, batch_size: int, seq_len: int, steps: int, input_downsample: int, workers: int
 ) -> dict:
+    """Seconds per optimizer step on in-memory frames vs on the datamodule's batches."""
     torch.manual_seed(0)
-    module = CVPT(
-        model="tiny", tbptt_len=tbptt, cosine_steps=100, input_downsample=input_downsample
-    )
+    module = CVPT(model="tiny", tbptt_len=seq_len, cosine_steps=100,
+                  input_downsample=input_downsample, activation_checkpointing=False)
     optimizer = module.configure_optimizers()["optimizer"]
-    frames = torch.randint(0, 256, (batch_size, seq_len, 144, 144, 3), dtype=torch.uint8)
-    actions = torch.randint(0, 17, (batch_size, seq_len))
-    first = torch.zeros(batch_size, seq_len, dtype=torch.bool)
     module.train()
-    times = []
-    for _ in range(steps + 1):  # the first step warms up
-        start = time.perf_counter()
-        loss = module._loss(module(frames, first), actions)
+
+    def step(batch: dict) -> None:
+        loss = module._loss(module(batch["frames"], batch["first"]), batch["actions"])
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(module.parameters(), 5.0)
         optimizer.step()
-        times.append(time.perf_counter() - start)
-    seconds = float(np.median(times[1:]))
-    frames_per_step = batch_size * seq_len
-    return {"batch": batch_size, "seq_len": seq_len, "tbptt": tbptt,
-            "input_downsample": input_downsample, "seconds": seconds,
-            "frames_per_step": frames_per_step, "frames_per_s": frames_per_step / seconds}
+
+    loader = iter(_datamodule(root, seq_len, batch_size, workers).train_dataloader())
+    fixed = next(loader)
+    step(fixed)  # warm-up
+    start = time.perf_counter()
+    for _ in range(steps):
+        step(fixed)
+    model_only = (time.perf_counter() - start) / steps
+    start = time.perf_counter()
+    for _ in range(steps):
+        step(next(loader))
+    with_data = (time.perf_counter() - start) / steps
+    frames = batch_size * seq_len
+    return {"batch": batch_size, "seq_len": seq_len, "input_downsample": input_downsample,
+            "workers": workers, "steps": steps, "model_only_s_per_step": model_only,
+            "with_datamodule_s_per_step": with_data, "frames_per_s_model_only": frames / model_only,
+            "frames_per_s_with_datamodule": frames / with_data,
+            "loader_overhead": (with_data - model_only) / with_data}
 
 
 def cached_vs_recompute(steps: int, num_envs: int) -> dict:
@@ -106,37 +119,57 @@ def cached_vs_recompute(steps: int, num_envs: int) -> dict:
             "recompute_ms_per_step": 1e3 * recompute, "speedup": recompute / cached}
 
 
+def _vm_hwm_mib() -> float:
+    """Peak resident memory of this process since the last reset (Linux /proc)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    raise RuntimeError("no VmHWM in /proc/self/status (Linux only)")
+
+
+def _vm_rss_mib() -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    raise RuntimeError("no VmRSS in /proc/self/status (Linux only)")
+
+
 def preset_memory(name: str, seq_len: int) -> dict:
-    """Run in a fresh process: build the preset, forward one sequence without grad."""
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    model = CVPTModel(CVPTConfig.from_name(name)).eval()
-    built = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    """Run in a fresh process: peak RSS of building the preset and one training step on one
+    sequence of ``seq_len`` 144-px frames, above the imports' own footprint."""
+    Path("/proc/self/clear_refs").write_text("5")  # reset VmHWM to the current RSS
+    base = _vm_rss_mib()
+    model = CVPTModel(CVPTConfig.from_name(name))
+    built = _vm_rss_mib()
+    optimizer = torch.optim.AdamW(model.parameters(), lr=1e-4)
     frames = torch.randint(0, 256, (1, seq_len, 144, 144, 3), dtype=torch.uint8)
+    first = torch.zeros(1, seq_len, dtype=torch.bool)
     start = time.perf_counter()
-    with torch.no_grad():
-        model(frames, torch.zeros(1, seq_len, dtype=torch.bool), model.initial_state(1))
+    logits, _ = model(frames, first, model.initial_state(1))
+    logits.float().logsumexp(-1).mean().backward()
+    optimizer.step()
     seconds = time.perf_counter() - start
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return {"params": model.get_num_params(), "seq_len": seq_len, "forward_s": seconds,
-            "rss_before_mib": before / 1024, "rss_after_build_mib": built / 1024,
-            "peak_rss_mib": peak / 1024}
+    return {"params": model.get_num_params(), "seq_len": seq_len, "train_step_s": seconds,
+            "rss_imports_mib": base, "model_mib": built - base,
+            "peak_above_imports_mib": _vm_hwm_mib() - base}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default="data/crafterplay_smoke")
+    parser.add_argument("--steps", type=int, default=6, help="timed steps per measurement")
+    parser.add_argument("--workers", type=int, default=1, help="DataLoader workers")
     parser.add_argument("--preset-memory", help=argparse.SUPPRESS)  # child-process mode
     args = parser.parse_args()
     if args.preset_memory:
         print(json.dumps(preset_memory(args.preset_memory, seq_len=16)))
         return
 
-    step = train_step_seconds(batch_size=2, seq_len=64, tbptt=64, steps=2)
-    # configs/cvpt_tiny_cpu.yaml: frames pooled to 72 px, so the step is cheaper and the
-    # loader's share larger
-    step_72 = train_step_seconds(batch_size=2, seq_len=64, tbptt=64, steps=2, input_downsample=2)
-    loader = loader_frames_per_s(args.data, seq_len=64, batch_size=2, min_frames=4 * step["frames_per_step"])
-    loader_seconds_per_step = step["frames_per_step"] / loader["frames_per_s"]
+    throughput = {
+        "tiny_144px": training_throughput(args.data, 2, 64, args.steps, 1, args.workers),
+        "tiny_72px": training_throughput(args.data, 8, 64, args.steps, 2, args.workers),
+    }
+    loader = loader_frames_per_s(args.data, seq_len=64, batch_size=8, min_frames=8192)
     presets = {}
     for name in ("tiny", "base", "large"):
         out = subprocess.run(
@@ -147,11 +180,8 @@ def main() -> None:
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
                     "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
                     "load_avg_1m": os.getloadavg()[0]},
-        "train_step_tiny": step,
-        "train_step_tiny_72px": step_72,
-        "datamodule": loader,
-        "loader_share_of_step": loader_seconds_per_step / step["seconds"],
-        "loader_share_of_step_72px": loader_seconds_per_step / step_72["seconds"],
+        "training": throughput,
+        "datamodule_alone": loader,
         "inference_tiny": cached_vs_recompute(steps=30, num_envs=1),
         "presets": presets,
     }
