@@ -45,7 +45,10 @@ def build_parser() -> argparse.ArgumentParser:
             continue
         getattr(mod, func)(sub)
     for verb in TRAIN_VERBS:
-        sub.add_parser(verb, help=f"LightningCLI {verb} (--config configs/<model>.yaml)", add_help=False)
+        extra = "; writes <run>/predictions/*.npz" if verb == "predict" else ""
+        sub.add_parser(
+            verb, help=f"LightningCLI {verb} (--config configs/<model>.yaml){extra}", add_help=False
+        )
     return parser
 
 
