@@ -119,28 +119,21 @@ def cached_vs_recompute(steps: int, num_envs: int) -> dict:
             "recompute_ms_per_step": 1e3 * recompute, "speedup": recompute / cached}
 
 
-def _vm_hwm_mib() -> float:
-    """Peak resident memory of this process since the last reset (Linux /proc)."""
+def _proc_status_mib(field: str) -> float:
+    """A memory field of /proc/self/status (VmRSS: now, VmHWM: peak since the last reset)."""
     for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
+        if line.startswith(f"{field}:"):
             return int(line.split()[1]) / 1024
-    raise RuntimeError("no VmHWM in /proc/self/status (Linux only)")
-
-
-def _vm_rss_mib() -> float:
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    raise RuntimeError("no VmRSS in /proc/self/status (Linux only)")
+    raise RuntimeError(f"no {field} in /proc/self/status (Linux only)")
 
 
 def preset_memory(name: str, seq_len: int) -> dict:
     """Run in a fresh process: peak RSS of building the preset and one training step on one
     sequence of ``seq_len`` 144-px frames, above the imports' own footprint."""
     Path("/proc/self/clear_refs").write_text("5")  # reset VmHWM to the current RSS
-    base = _vm_rss_mib()
+    base = _proc_status_mib("VmRSS")
     model = CVPTModel(CVPTConfig.from_name(name))
-    built = _vm_rss_mib()
+    built = _proc_status_mib("VmRSS")
     optimizer = torch.optim.AdamW(model.parameters(), lr=1e-4)
     frames = torch.randint(0, 256, (1, seq_len, 144, 144, 3), dtype=torch.uint8)
     first = torch.zeros(1, seq_len, dtype=torch.bool)
@@ -151,7 +144,7 @@ def preset_memory(name: str, seq_len: int) -> dict:
     seconds = time.perf_counter() - start
     return {"params": model.get_num_params(), "seq_len": seq_len, "train_step_s": seconds,
             "rss_imports_mib": base, "model_mib": built - base,
-            "peak_above_imports_mib": _vm_hwm_mib() - base}
+            "peak_above_imports_mib": _proc_status_mib("VmHWM") - base}
 
 
 def main() -> None:

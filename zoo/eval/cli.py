@@ -82,7 +82,8 @@ def _build_agent(args: argparse.Namespace, num_envs: int):
     except ValueError as err:
         raise UsageError(str(err)) from None
     except ImportError as err:
-        raise UsageError(f"agent {args.agent!r} is not available in this install: {err}") from None
+        who = repr(args.agent) if args.agent else f"of {args.checkpoint}"
+        raise UsageError(f"the agent {who} is not available in this install: {err}") from None
 
 
 def run_eval(args: argparse.Namespace) -> int:
