@@ -30,6 +30,23 @@ class WandbSaveConfigCallback(SaveConfigCallback):
                 logger.log_hyperparams({"config": config})
 
 
+_RUN_DIRS_GIVEN: set[Path] = set()
+
+
+def _new_run_dir(root: Path) -> Path:
+    """``root/<time>-<pid>``, with a ``-N`` suffix when that folder exists or was handed to an
+    earlier run of this process in the same second (a fit then a resume in a notebook).
+
+    The folder is not created here: ``--print_config`` and ``run=False`` leave no trace."""
+    stem = f"{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
+    run_dir, n = root / stem, 0
+    while run_dir in _RUN_DIRS_GIVEN or run_dir.exists():
+        n += 1
+        run_dir = root / f"{stem}-{n}"
+    _RUN_DIRS_GIVEN.add(run_dir)
+    return run_dir
+
+
 class ZooCLI(LightningCLI):
     """Puts each run in its own folder: ``<trainer.default_root_dir>/<time>-<pid>``.
 
@@ -39,8 +56,7 @@ class ZooCLI(LightningCLI):
 
     def before_instantiate_classes(self) -> None:
         config = self.config[self.subcommand] if self.subcommand else self.config
-        root = Path(config.trainer.default_root_dir or "runs")
-        run_dir = root / f"{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
+        run_dir = _new_run_dir(Path(config.trainer.default_root_dir or "runs"))
         config.trainer.default_root_dir = str(run_dir)
         loggers = config.trainer.logger
         for logger in loggers if isinstance(loggers, list) else [loggers]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import lightning as L
@@ -136,3 +137,17 @@ def test_predict_writes_the_test_episodes_actions_and_distributions(crafterplay:
             assert np.array_equal(pred["predicted"], pred["probs"].argmax(-1))
             assert pred["step"].dtype == np.int64 and (pred["step"] >= 0).all()
             assert {episode_split(e, 0.3, 0.5) for e in pred["episode"].ravel()} == {"test"}
+
+
+def test_two_runs_started_in_the_same_second_get_their_own_folders(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from lit_models import cli
+
+    monkeypatch.setattr(cli.time, "strftime", lambda fmt: "20260101-000000")
+    first = cli._new_run_dir(tmp_path)
+    second = cli._new_run_dir(tmp_path)
+    (tmp_path / f"20260101-000000-{os.getpid()}-2").mkdir()  # left by another session
+    third = cli._new_run_dir(tmp_path)
+    assert len({first, second, third}) == 3 and not first.exists()
+    assert third.name == f"20260101-000000-{os.getpid()}-3"
