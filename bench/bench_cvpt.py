@@ -6,6 +6,7 @@ Measures:
     memory; the loader's overhead is the extra time per step (goal <= 10%), at 144 px (the
     paper's input) and at 72 px (configs/cvpt_tiny_cpu.yaml, where the step is ~5x cheaper);
   * the datamodule alone (one process) in frames/s;
+  * a tiny 72-px training step in fp32 against bf16 autocast (the CPU recipe's precision);
   * cached per-step inference (rolling TrXL memory) against recomputing the whole window of
     memory_len + 1 frames every step (goal >= 5x);
   * parameters and peak resident memory of one training step (forward + backward + AdamW) per
@@ -58,6 +59,44 @@ def loader_frames_per_s(root: str, seq_len: int, batch_size: int, min_frames: in
             "workers": 0, "noop_filter": True}
 
 
+def _train_step(module: CVPT, optimizer: torch.optim.Optimizer, batch: dict, bf16: bool) -> None:
+    """One optimizer step as Lightning runs it (precision 32 or bf16-mixed, clip 5)."""
+    with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+        loss = module._loss(module(batch["frames"], batch["first"]), batch["actions"])
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    torch.nn.utils.clip_grad_norm_(module.parameters(), 5.0)
+    optimizer.step()
+
+
+def bf16_vs_fp32(batch_size: int, seq_len: int, steps: int, input_downsample: int) -> dict:
+    """Seconds per tiny training step on one in-memory batch, fp32 against bf16 autocast
+    (configs/cvpt_tiny_cpu.yaml's precision); alternated so load drifts hit both alike."""
+    torch.manual_seed(0)
+    module = CVPT(model="tiny", tbptt_len=seq_len, cosine_steps=100,
+                  input_downsample=input_downsample, activation_checkpointing=False)
+    optimizer = module.configure_optimizers()["optimizer"]
+    module.train()
+    batch = {
+        "frames": torch.randint(0, 256, (batch_size, seq_len, 144, 144, 3), dtype=torch.uint8),
+        "first": torch.zeros(batch_size, seq_len, dtype=torch.bool),
+        "actions": torch.randint(0, 17, (batch_size, seq_len)),
+    }
+    seconds = {False: 0.0, True: 0.0}
+    for bf16 in (False, True):
+        _train_step(module, optimizer, batch, bf16)  # warm-up (oneDNN kernels per dtype)
+    for _ in range(steps):
+        for bf16 in (False, True):
+            start = time.perf_counter()
+            _train_step(module, optimizer, batch, bf16)
+            seconds[bf16] += time.perf_counter() - start
+    flags = Path("/proc/cpuinfo").read_text().split()
+    return {"batch": batch_size, "seq_len": seq_len, "input_downsample": input_downsample,
+            "steps": steps, "fp32_s_per_step": seconds[False] / steps,
+            "bf16_s_per_step": seconds[True] / steps, "speedup": seconds[False] / seconds[True],
+            "cpu_amx_bf16": "amx_bf16" in flags, "cpu_avx512_bf16": "avx512_bf16" in flags}
+
+
 def training_throughput(
     root: str, batch_size: int, seq_len: int, steps: int, input_downsample: int, workers: int
 ) -> dict:
@@ -69,11 +108,7 @@ def training_throughput(
     module.train()
 
     def step(batch: dict) -> None:
-        loss = module._loss(module(batch["frames"], batch["first"]), batch["actions"])
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(module.parameters(), 5.0)
-        optimizer.step()
+        _train_step(module, optimizer, batch, bf16=False)
 
     loader = iter(_datamodule(root, seq_len, batch_size, workers).train_dataloader())
     fixed = next(loader)
@@ -175,6 +210,7 @@ def main() -> None:
                     "load_avg_1m": os.getloadavg()[0]},
         "training": throughput,
         "datamodule_alone": loader,
+        "precision_tiny_72px": bf16_vs_fp32(8, 64, args.steps, 2),
         "inference_tiny": cached_vs_recompute(steps=30, num_envs=1),
         "presets": presets,
     }

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from zoo.envs.constants import ACHIEVEMENT_NAMES
+from zoo.eval.death import death_shares
 from zoo.eval.plots import plot_success_rates, write_gif
 from zoo.eval.rollout import EpisodeResult
 from zoo.eval.score import chunked, crafter_score, normalized_return, success_rates
@@ -57,6 +58,7 @@ def summarize(results: list[EpisodeResult], chunks: int = PAPER_CHUNKS) -> dict:
         "episode_length": _spread(lengths),
         "success_rates": dict(zip(ACHIEVEMENT_NAMES, rates.tolist())),
         "median_unlock_step": median_unlock,
+        "episode_end_percent": death_shares([r.death for r in results]),
     }
 
 
@@ -122,6 +124,9 @@ def format_table(report: dict) -> str:
         f" raw {report['return']['mean']:.2f})",
         f"episodes {report['episodes']} in {report['chunks']} chunks of {size_text};"
         f" length mean {length['mean']:.0f} (min {length['min']:.0f}, max {length['max']:.0f})",
+        "episodes ended by: " + ", ".join(
+            f"{cause} {share:.0f}%" for cause, share in report["episode_end_percent"].items() if share
+        ),
         "",
         f"{'achievement':<20} {'success %':>9}",
     ]

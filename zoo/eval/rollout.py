@@ -17,6 +17,7 @@ from tqdm.auto import tqdm
 from zoo.agents.base import Agent
 from zoo.envs.base import GameEnv, episode_seed
 from zoo.envs.constants import NUM_ACHIEVEMENTS
+from zoo.eval.death import death_cause
 
 
 @dataclass
@@ -24,7 +25,8 @@ class EpisodeResult:
     """What one episode achieved.
 
     ``unlock_step[i]`` is the number of steps taken when achievement i was first unlocked
-    (1..length), -1 if never. ``frames`` (uint8 (T, H, W, 3)) is kept for the GIF episode only,
+    (1..length), -1 if never. ``death`` is why it ended (``zoo.eval.death.DEATH_CAUSES``).
+    ``frames`` (uint8 (T, H, W, 3)) is kept for the GIF episode only,
     subsampled evenly over the whole episode (see ``FrameSampler``); None for the others.
     """
 
@@ -34,6 +36,7 @@ class EpisodeResult:
     episode_return: float
     unlocked: np.ndarray  # (22,) bool, zoo achievement order
     unlock_step: np.ndarray  # (22,) int64
+    death: str = "other"
     frames: np.ndarray | None = None
 
 
@@ -82,7 +85,7 @@ class _Slot:
         if self.sampler is not None and frame is not None:
             self.sampler.add(self.length, frame)
 
-    def result(self, last_frame: np.ndarray | None) -> EpisodeResult:
+    def result(self, last_frame: np.ndarray | None, death: str) -> EpisodeResult:
         frames = None
         if self.sampler is not None and last_frame is not None:
             frames = self.sampler.finish(self.length, last_frame)
@@ -93,6 +96,7 @@ class _Slot:
             episode_return=self.episode_return,
             unlocked=self.unlock_step >= 0,
             unlock_step=self.unlock_step.copy(),
+            death=death,
             frames=frames,
         )
 
@@ -157,6 +161,7 @@ def evaluate(
     bar = tqdm(total=episodes, unit="ep", desc=f"eval {env.name}", disable=not progress)
     try:
         while len(results) < episodes:
+            before = step.state
             step = env.step(agent.act(step))
             reset_mask = np.zeros(n, bool)
             for i, slot in enumerate(slots):
@@ -167,7 +172,7 @@ def evaluate(
                 env_steps += 1
                 if not step.done[i]:
                     continue
-                result = slot.result(frame)
+                result = slot.result(frame, death_cause(before, step.state, i))
                 results.append(result)
                 bar.update(1)
                 if on_episode is not None:

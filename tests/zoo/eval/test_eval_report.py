@@ -24,7 +24,7 @@ def make_results(n=10, frames=True):
         results.append(EpisodeResult(
             index=j, seed=100 + j, length=100 + 7 * j,
             episode_return=float(unlocked.sum()) - 0.1 * (j % 3),
-            unlocked=unlocked, unlock_step=unlock_step,
+            unlocked=unlocked, unlock_step=unlock_step, death=("zombie", "needs")[j % 2],
             frames=(
                 rng.integers(0, 255, (5, 144, 144, 3), dtype=np.uint8)
                 if frames and j == 0 else None
@@ -56,6 +56,8 @@ def test_report_files_and_keys(tmp_path):
     assert saved["crafter_score"]["chunk_sizes"] == [2] * 5
     assert list(saved["success_rates"]) == list(ACHIEVEMENT_NAMES)
     assert saved["episode_length"]["min"] == 100 and saved["episode_length"]["max"] == 163
+    assert saved["episode_end_percent"]["zombie"] == 50.0 and saved["episode_end_percent"]["needs"] == 50.0
+    assert "zombie 50%, needs 50%" in format_table(saved)
 
 
 def test_report_agrees_with_crafters_analysis_of_stats_jsonl(tmp_path):

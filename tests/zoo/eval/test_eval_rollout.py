@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
 from zoo.agents import RandomAgent
 from zoo.envs import ACHIEVEMENT_NAMES, Step, make_env
+from zoo.envs.schema import empty_state
+from zoo.eval.death import DEATH_CAUSES
 from zoo.eval.rollout import FrameSampler, episode_seed, evaluate
 
 WOOD = ACHIEVEMENT_NAMES.index("collect_wood")
@@ -36,7 +37,8 @@ class CountingGame:
         achievements[self.t > self.length] = True
         count = np.minimum(self.t, 255).astype(np.uint8)[:, None, None, None]
         frames = np.broadcast_to(count, (self.num_envs, 144, 144, 3)).copy()
-        state = {"achievements": achievements}
+        state = empty_state(self.num_envs)  # the full schema: evaluate reads vitals at the end
+        state["achievements"] = achievements
         return Step(frames, state, reward.astype(np.float32), self.t >= self.length)
 
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> Step:
@@ -53,7 +55,7 @@ class CountingGame:
 def summary(results):
     return [
         (r.index, r.seed, r.length, round(r.episode_return, 6), r.unlocked.tolist(),
-         r.unlock_step.tolist())
+         r.unlock_step.tolist(), r.death)
         for r in results
     ]
 
@@ -115,6 +117,8 @@ def test_crafter_same_episodes_for_any_num_envs():
 
     one, three = run(1, seed=2), run(3, seed=2)
     assert summary(one) == summary(three)
+    for r in one:  # a random player rarely dies in 100 steps; at the limit it survived
+        assert r.death in DEATH_CAUSES and (r.death == "survived") == (r.length == 100)
     assert one[0].frames.shape == (one[0].length + 1, 144, 144, 3)
     other = run(1, seed=3, episodes=1)
     assert other[0].seed != one[0].seed
