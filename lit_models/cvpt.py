@@ -10,6 +10,9 @@ is one window's, not the whole sequence's, for ~1/3 more compute.
 
 from __future__ import annotations
 
+import dataclasses
+from pathlib import Path
+
 import lightning as L
 import torch
 from torch import nn
@@ -19,6 +22,7 @@ from torchmetrics import MetricCollection
 from torchmetrics.classification import MulticlassAccuracy
 
 from lit_models.schedules import WarmupCosine
+from zoo.export import load_checkpoint_model, load_exported
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 
 IGNORE_ACTION = -1  # the episode's final observation has no action
@@ -32,6 +36,20 @@ def _accuracy_metrics(num_actions: int, prefix: str) -> MetricCollection:
         },
         prefix=prefix,
     )
+
+
+def _network_weights(path: str, config: CVPTConfig) -> dict[str, torch.Tensor]:
+    """State dict of the C-VPT network at ``path``, refused unless its config is ``config``."""
+    if not Path(path).exists():
+        raise FileNotFoundError(f"model.init_weights={path}: no such checkpoint or export folder")
+    source = load_exported(path) if Path(path).is_dir() else load_checkpoint_model(path)
+    if source.config != config:
+        theirs, ours = dataclasses.asdict(source.config), dataclasses.asdict(config)
+        diff = {k: (theirs[k], ours[k]) for k in ours if theirs.get(k) != ours[k]}
+        raise ValueError(
+            f"model.init_weights={path} holds a different C-VPT: (its value, this model's) {diff}"
+        )
+    return source.state_dict()
 
 
 class CVPT(L.LightningModule):
@@ -59,6 +77,7 @@ class CVPT(L.LightningModule):
         min_lr_ratio: float = 0.0,
         label_smoothing: float = 0.0,
         activation_checkpointing: bool = True,
+        init_weights: str | None = None,
     ) -> None:
         """Args:
             model: C-VPT preset (tiny, base, large); the size arguments below override it.
@@ -82,6 +101,10 @@ class CVPT(L.LightningModule):
             label_smoothing: cross-entropy label smoothing.
             activation_checkpointing: recompute each TBPTT window in backward (memory of one
                 window instead of the whole sequence).
+            init_weights: a C-VPT ``.ckpt`` or ``zoo export`` folder whose network starts this
+                run with a fresh optimizer and schedule (fine-tuning, or training on past a
+                finished cosine); same architecture required. Loaded in ``setup``, so
+                ``load_from_checkpoint`` never needs the file.
         """
         super().__init__()
         self.save_hyperparameters()
@@ -105,6 +128,16 @@ class CVPT(L.LightningModule):
         self.train_metrics = _accuracy_metrics(num_actions, "train/")
         self.val_metrics = _accuracy_metrics(num_actions, "val/")
         self.test_metrics = _accuracy_metrics(num_actions, "test/")
+        self._weights_ready = init_weights is None
+
+    def setup(self, stage: str) -> None:
+        # A --ckpt_path resume restores its own weights after this (on_load_checkpoint).
+        if not self._weights_ready:
+            self.model.load_state_dict(_network_weights(self.hparams.init_weights, self.config))
+            self._weights_ready = True
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        self._weights_ready = True
 
     def forward(self, frames: torch.Tensor, first: torch.Tensor) -> torch.Tensor:
         """Logits (B, T, num_actions) for whole sequences, window by window from empty memory."""

@@ -138,3 +138,32 @@ def test_checkpoint_reload_gives_identical_logits(tmp_path: Path) -> None:
         plain = load_checkpoint_model(path)
         logits, _ = plain(batch["frames"], batch["first"], plain.initial_state(2))
     torch.testing.assert_close(logits, expected, atol=1e-5, rtol=0)
+
+
+def test_init_weights_starts_a_new_run_from_a_finished_one(tmp_path: Path) -> None:
+    torch.manual_seed(0)
+    batch = _batch()
+    trained = CVPT(**SMALL, cosine_steps=100)
+    trainer = _trainer(2, tmp_path)
+    trainer.fit(trained, train_dataloaders=_repeat(batch, 2))
+    path = tmp_path / "model.ckpt"
+    trainer.save_checkpoint(path)
+
+    follow_up = CVPT(**SMALL, cosine_steps=50, lr=1e-4, init_weights=str(path))
+    assert not torch.equal(follow_up.model.policy_head.weight, trained.model.policy_head.weight)
+    follow_up.setup("fit")  # where Lightning loads them: construction alone reads no file
+    theirs = trained.model.state_dict()
+    for name, ours in follow_up.model.state_dict().items():
+        assert torch.equal(ours, theirs[name]), name
+    # a run that started from init_weights reloads without the file
+    _trainer(1, tmp_path).fit(follow_up, train_dataloaders=_repeat(batch, 1))
+    path.rename(tmp_path / "gone.ckpt")
+    again = tmp_path / "follow_up.ckpt"
+    follow_up.trainer.save_checkpoint(again)
+    CVPT.load_from_checkpoint(again)
+
+    with pytest.raises(FileNotFoundError, match="model.init_weights=.*gone-too"):
+        CVPT(**SMALL, init_weights=str(tmp_path / "gone-too.ckpt")).setup("fit")
+    wider = CVPT(**{**SMALL, "d_model": 64}, init_weights=str(tmp_path / "gone.ckpt"))
+    with pytest.raises(ValueError, match=r"different C-VPT.*'d_model': \(32, 64\)"):
+        wider.setup("fit")
