@@ -41,7 +41,11 @@ def _accuracy_metrics(num_actions: int, prefix: str) -> MetricCollection:
 def _network_weights(path: str, config: CVPTConfig) -> dict[str, torch.Tensor]:
     """State dict of the C-VPT network at ``path``, refused unless its config is ``config``."""
     if not Path(path).exists():
-        raise FileNotFoundError(f"model.init_weights={path}: no such checkpoint or export folder")
+        raise FileNotFoundError(
+            f"model.init_weights={path}: no such checkpoint or export folder (resuming or testing"
+            " a run that started from it? Its weights are in --ckpt_path: add"
+            " --model.init_args.init_weights=null)"
+        )
     source = load_exported(path) if Path(path).is_dir() else load_checkpoint_model(path)
     if source.config != config:
         theirs, ours = dataclasses.asdict(source.config), dataclasses.asdict(config)
