@@ -1,9 +1,9 @@
 """C-VPT speed and memory on this machine (CPU) -> bench/results/cvpt.json.
 
 Measures:
-  * training throughput of the tiny model fed by CrafterPlayDataModule (DataLoader workers
-    decoding, filtering and packing in parallel) against the same steps on a batch already in
-    memory; the loader's overhead is the extra time per step (goal <= 10%), at 144 px (the
+  * training throughput of the tiny model (fp32, and bf16 as configs/cvpt_tiny_cpu.yaml) fed by
+    CrafterPlayDataModule (DataLoader workers decoding, filtering and packing in parallel)
+    against the same steps on a batch already in memory; the loader's overhead is the extra time per step (goal <= 10%), at 144 px (the
     paper's input) and at 72 px (configs/cvpt_tiny_cpu.yaml, where the step is ~5x cheaper);
   * the datamodule alone (one process) in frames/s;
   * a tiny 72-px training step in fp32 against bf16 autocast (the CPU recipe's precision);
@@ -98,7 +98,8 @@ def bf16_vs_fp32(batch_size: int, seq_len: int, steps: int, input_downsample: in
 
 
 def training_throughput(
-    root: str, batch_size: int, seq_len: int, steps: int, input_downsample: int, workers: int
+    root: str, batch_size: int, seq_len: int, steps: int, input_downsample: int, workers: int,
+    bf16: bool = False,
 ) -> dict:
     """Seconds per optimizer step on in-memory frames vs on the datamodule's batches."""
     torch.manual_seed(0)
@@ -108,7 +109,7 @@ def training_throughput(
     module.train()
 
     def step(batch: dict) -> None:
-        _train_step(module, optimizer, batch, bf16=False)
+        _train_step(module, optimizer, batch, bf16)
 
     loader = iter(_datamodule(root, seq_len, batch_size, workers).train_dataloader())
     fixed = next(loader)
@@ -123,7 +124,7 @@ def training_throughput(
     with_data = (time.perf_counter() - start) / steps
     frames = batch_size * seq_len
     return {"batch": batch_size, "seq_len": seq_len, "input_downsample": input_downsample,
-            "workers": workers, "steps": steps, "model_only_s_per_step": model_only,
+            "bf16": bf16, "workers": workers, "steps": steps, "model_only_s_per_step": model_only,
             "with_datamodule_s_per_step": with_data, "frames_per_s_model_only": frames / model_only,
             "frames_per_s_with_datamodule": frames / with_data,
             "loader_overhead": (with_data - model_only) / with_data}
@@ -196,6 +197,7 @@ def main() -> None:
     throughput = {
         "tiny_144px": training_throughput(args.data, 2, 64, args.steps, 1, args.workers),
         "tiny_72px": training_throughput(args.data, 8, 64, args.steps, 2, args.workers),
+        "tiny_72px_bf16": training_throughput(args.data, 8, 64, args.steps, 2, args.workers, True),
     }
     loader = loader_frames_per_s(args.data, seq_len=64, batch_size=8, min_frames=8192)
     presets = {}
