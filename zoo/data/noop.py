@@ -9,8 +9,7 @@ when its action had no effect on the game:
   or skeleton stands there (hitting one always costs it health), the inventory and
   achievements are unchanged and food/drink did not rise. DO facing grass is never a noop:
   it is a sapling try that pays with probability 0.1 in both games, so calling the 9 failed
-  tries in 10 noops would filter out most of the expert's sapling collecting (measured:
-  a tiny C-VPT trained without those tries collected a sapling in 1% of episodes);
+  tries in 10 noops would filter out most of the expert's sapling collecting;
 - SLEEP that did not put the player to sleep (energy already full);
 - PLACE_* / MAKE_* that left the inventory unchanged (nothing placed or made).
 Runs are computed per episode at generation time, so a run crossing a chunk boundary
