@@ -108,19 +108,16 @@ def training_throughput(
     optimizer = module.configure_optimizers()["optimizer"]
     module.train()
 
-    def step(batch: dict) -> None:
-        _train_step(module, optimizer, batch, bf16)
-
     loader = iter(_datamodule(root, seq_len, batch_size, workers).train_dataloader())
     fixed = next(loader)
-    step(fixed)  # warm-up
+    _train_step(module, optimizer, fixed, bf16)  # warm-up
     start = time.perf_counter()
     for _ in range(steps):
-        step(fixed)
+        _train_step(module, optimizer, fixed, bf16)
     model_only = (time.perf_counter() - start) / steps
     start = time.perf_counter()
     for _ in range(steps):
-        step(next(loader))
+        _train_step(module, optimizer, next(loader), bf16)
     with_data = (time.perf_counter() - start) / steps
     frames = batch_size * seq_len
     return {"batch": batch_size, "seq_len": seq_len, "input_downsample": input_downsample,

@@ -121,14 +121,20 @@ def test_warmup_cosine_schedule() -> None:
     assert schedule(110) == pytest.approx(0.1) and schedule(500) == pytest.approx(0.1)
 
 
-def test_checkpoint_reload_gives_identical_logits(tmp_path: Path) -> None:
+def _trained_checkpoint(batch: dict[str, torch.Tensor], root: Path) -> tuple[CVPT, Path]:
+    """A small CVPT after two steps on ``batch``, and its checkpoint ``root/model.ckpt``."""
     torch.manual_seed(0)
-    batch = _batch()
     module = CVPT(**SMALL, cosine_steps=100)
-    trainer = _trainer(2, tmp_path)
+    trainer = _trainer(2, root)
     trainer.fit(module, train_dataloaders=_repeat(batch, 2))
-    path = tmp_path / "model.ckpt"
+    path = root / "model.ckpt"
     trainer.save_checkpoint(path)
+    return module, path
+
+
+def test_checkpoint_reload_gives_identical_logits(tmp_path: Path) -> None:
+    batch = _batch()
+    module, path = _trained_checkpoint(batch, tmp_path)
     module.eval()
     with torch.no_grad():
         expected = module(batch["frames"], batch["first"])
@@ -141,13 +147,8 @@ def test_checkpoint_reload_gives_identical_logits(tmp_path: Path) -> None:
 
 
 def test_init_weights_starts_a_new_run_from_a_finished_one(tmp_path: Path) -> None:
-    torch.manual_seed(0)
     batch = _batch()
-    trained = CVPT(**SMALL, cosine_steps=100)
-    trainer = _trainer(2, tmp_path)
-    trainer.fit(trained, train_dataloaders=_repeat(batch, 2))
-    path = tmp_path / "model.ckpt"
-    trainer.save_checkpoint(path)
+    trained, path = _trained_checkpoint(batch, tmp_path)
 
     follow_up = CVPT(**SMALL, cosine_steps=50, lr=1e-4, init_weights=str(path))
     assert not torch.equal(follow_up.model.policy_head.weight, trained.model.policy_head.weight)

@@ -54,9 +54,10 @@ def noop_flags(actions: np.ndarray, before: State, after: State) -> np.ndarray:
 
     facing = before["player_pos"].astype(np.int64) + _OFFSETS[before["player_dir"].astype(np.int64)]
     row, col = np.clip(facing[:, 0], 0, MAP_SIZE - 1), np.clip(facing[:, 1], 0, MAP_SIZE - 1)
-    block_same = before["map"][idx, row, col] == after["map"][idx, row, col]
+    facing_block = before["map"][idx, row, col]
+    block_same = facing_block == after["map"][idx, row, col]
     mob_there = np.isin(before["mob_map"][idx, row, col], _HITTABLE)
-    sapling_try = before["map"][idx, row, col] == Block.GRASS
+    sapling_try = facing_block == Block.GRASS
     do_noop = block_same & ~mob_there & ~sapling_try & inv_same & ach_same & ~fed
 
     noop = actions == Action.NOOP

@@ -15,8 +15,8 @@ from zoo.envs import ENV_NAMES
 DESCRIPTION = """\
 Play an agent in Craftax-Classic or original crafter and score it the paper's way: Crafter
 Score and normalized Return as mean ± std over 5 chunks of the episodes (100 episodes = 5 x 20).
-Writes OUT/report.json, OUT/stats.jsonl (crafter's Recorder format), OUT/achievements.png and
-OUT/episode.gif. Episode j is seeded from (--seed, j), so --num-envs changes speed, not results.
+Writes OUT/report.json (also how episodes ended: survived, lava, zombie, arrow, a need at 0),
+OUT/stats.jsonl (crafter's Recorder format), OUT/achievements.png and OUT/episode.gif. Episode j is seeded from (--seed, j), so --num-envs changes speed, not results.
 Frames are rendered when the agent reads pixels or a GIF is wanted; a state-only expert with
 --no-gif skips rendering: crafter ~3,200 vs ~700 env-steps/s, Craftax ~5,900 vs ~2,400 (1 core).
 """
