@@ -5,8 +5,9 @@ node and DataLoader worker -> shard order shuffled (train) -> samples decoded wi
 ``zoo.captions.dataset.decode_caption_sample`` -> sample shuffle buffer (train) -> batches of
 {frames uint8 (B, 6, 144, 144, 3), caption_id int64 (B,), episode int64, step int64, caption,
 rule, category (lists of str)}. Training repeats the stream and cuts it into epochs of
-``train_batches_per_epoch`` batches. Shuffles are seeded from each worker's torch seed, so
-``seed_everything`` makes them reproducible while each epoch and each pass gets a new order.
+``train_batches_per_epoch`` batches. Shuffles follow the run's seed, epoch, rank and worker
+(``datamodules.seeded_shuffle``): ``seed_everything`` (or ``seed``) makes them reproducible, a
+resumed fit included, while each epoch and each pass gets a new order.
 
 CrafterCaption has a train and a held-out ("test") split of whole episodes; validation and test
 both read the held-out split by default (the paper evaluates retrieval on held-out episodes).
@@ -15,62 +16,18 @@ both read the held-out split by default (the paper evaluates retrieval on held-o
 from __future__ import annotations
 
 import json
-import random
-from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import lightning as L
-import numpy as np
 import torch
 import webdataset as wds
 from lightning.pytorch.utilities import rank_zero_warn
 from torch.utils.data import DataLoader
 
+from datamodules.seeded_shuffle import EpochSeededStream, SeededShuffle, run_seed, seeded_loader
+from zoo.captions.clips import collate_clips
 from zoo.captions.dataset import decode_caption_sample, list_caption_shards
 from zoo.captions.vocabulary import load_vocabulary
-
-TENSOR_KEYS = {
-    "frames": torch.uint8, "caption_id": torch.int64, "episode": torch.int64, "step": torch.int64
-}
-TEXT_KEYS = ("caption", "rule", "category")
-
-
-class SeededShuffle:
-    """A shuffle-buffer stage whose order comes from the worker's torch seed and a pass counter.
-
-    webdataset's own shuffle seeds from the clock; DataLoader gives every worker a seed derived from
-    the main process's torch RNG, which differs per epoch and is fixed by ``seed_everything``.
-    """
-
-    def __init__(self, bufsize: int, salt: int) -> None:
-        self.bufsize = bufsize
-        self.salt = salt
-        self.passes = 0
-
-    def __call__(self, items: Iterable) -> Iterator:
-        rng = random.Random(f"{torch.initial_seed()}:{self.salt}:{self.passes}")
-        self.passes += 1
-        buffer: list = []
-        for item in items:
-            if len(buffer) < self.bufsize:
-                buffer.append(item)
-                continue
-            index = rng.randrange(len(buffer))
-            buffer[index], item = item, buffer[index]
-            yield item
-        rng.shuffle(buffer)
-        yield from buffer
-
-
-def collate_clips(samples: list[dict]) -> dict:
-    """Decoded samples -> one batch (tensors for arrays and numbers, lists for strings)."""
-    batch: dict = {
-        key: torch.as_tensor(np.stack([np.asarray(s[key]) for s in samples]), dtype=dtype)
-        for key, dtype in TENSOR_KEYS.items()
-    }
-    batch.update({key: [str(s[key]) for s in samples] for key in TEXT_KEYS})
-    return batch
-
 
 def check_manifest_captions(root: str | Path) -> None:
     """Caption ids in the shards must mean the captions this checkout's vocabulary lists."""
@@ -103,6 +60,7 @@ class CrafterCaptionDataModule(L.LightningDataModule):
         val_split: str | None = None,
         test_split: str = "test",
         pin_memory: bool = True,
+        seed: int | None = None,
     ) -> None:
         """Args:
             root: CrafterCaption folder (manifest.json + shards), written by zoo.captions.dataset.
@@ -113,11 +71,13 @@ class CrafterCaptionDataModule(L.LightningDataModule):
             train_batches_per_epoch: epoch length in batches over all workers (the stream repeats
                 to fill it); None: one pass over the training shards.
             train_split: manifest split to train on.
-            val_split: manifest split to validate on; None: "val" when the manifest has one
-                (``zoo data caption --val-episodes``), else the test split (with a warning:
-                a best-by-validation checkpoint is then chosen on the test episodes).
+            val_split: manifest split to validate on; None: "val" (``zoo data caption
+                --val-episodes``), and an error when the manifest has none. Naming the test split
+                here is allowed with a warning (checkpoints are then chosen on test episodes).
             test_split: manifest split to test on (the held-out episodes).
             pin_memory: page-locked batches for faster host-to-GPU copies.
+            seed: seed of the training order (shard and clip shuffles); None: the run's
+                ``seed_everything`` value.
         """
         super().__init__()
         self.save_hyperparameters()
@@ -134,30 +94,38 @@ class CrafterCaptionDataModule(L.LightningDataModule):
             raise FileNotFoundError(f"{self.hparams.root}/manifest.json lists no {split!r} shards")
         return urls
 
-    def dataset(self, split: str, train: bool) -> wds.DataPipeline:
-        """The stream of batches of one manifest split (an IterableDataset; no length)."""
+    def dataset(self, split: str, train: bool, first_epoch: int = 0) -> EpochSeededStream:
+        """The stream of batches of one manifest split (an IterableDataset; no length).
+
+        Each iteration is one epoch; training shuffles are seeded by (seed, epoch), counting
+        from ``first_epoch``.
+        """
         hp = self.hparams
         urls = self.shards(split)
+        shuffles: list[SeededShuffle] = []
         stages = [wds.SimpleShardList(urls), wds.split_by_node, wds.split_by_worker]
         if train:
-            stages.append(SeededShuffle(len(urls), salt=0))
+            shuffles.append(SeededShuffle(len(urls), salt=0))
+            stages.append(shuffles[-1])
         stages += [wds.tarfile_to_samples(), wds.map(decode_caption_sample)]
         if train and hp.shuffle_buffer > 1:
-            stages.append(SeededShuffle(hp.shuffle_buffer, salt=1))
+            shuffles.append(SeededShuffle(hp.shuffle_buffer, salt=1))
+            stages.append(shuffles[-1])
         batch_size = hp.batch_size if train else hp.eval_batch_size
         stages.append(wds.batched(batch_size, collation_fn=collate_clips, partial=not train))
         pipeline = wds.DataPipeline(*stages)
         if train and hp.train_batches_per_epoch is not None:
             per_worker = max(1, hp.train_batches_per_epoch // max(1, hp.num_workers))
             pipeline = pipeline.with_epoch(per_worker)
-        return pipeline
+        return EpochSeededStream(pipeline, shuffles, run_seed(hp.seed), first_epoch)
 
     def _loader(self, split: str, train: bool) -> DataLoader:
-        return DataLoader(
-            self.dataset(split, train),
-            batch_size=None,
-            num_workers=self.hparams.num_workers,
-            pin_memory=self.hparams.pin_memory and torch.cuda.is_available(),
+        # a resumed fit builds its loader after the checkpoint restored the epoch
+        first_epoch = self.trainer.current_epoch if self.trainer is not None else 0
+        return seeded_loader(
+            self.dataset(split, train, first_epoch),
+            self.hparams.num_workers,
+            self.hparams.pin_memory and torch.cuda.is_available(),
         )
 
     def train_dataloader(self) -> DataLoader:
@@ -165,18 +133,29 @@ class CrafterCaptionDataModule(L.LightningDataModule):
 
     @property
     def val_split(self) -> str:
-        """The split validation reads (see ``val_split`` in ``__init__``)."""
-        if self.hparams.val_split is not None:
-            return self.hparams.val_split
-        manifest = json.loads((Path(self.hparams.root) / "manifest.json").read_text())
-        if "val" in manifest["splits"]:
+        """The split validation reads (see ``val_split`` in ``__init__``).
+
+        Validation picks the best checkpoint, so it must never read the test split by accident:
+        without a "val" split in the manifest this refuses, and an explicit ``val_split`` equal
+        to the test split is allowed with a warning.
+        """
+        hp = self.hparams
+        if hp.val_split is None:
+            manifest = json.loads((Path(hp.root) / "manifest.json").read_text())
+            if "val" not in manifest["splits"]:
+                raise ValueError(
+                    f"{hp.root}/manifest.json has no 'val' split, and validating on "
+                    f"{hp.test_split!r} would choose checkpoints on the test episodes. Rebuild it "
+                    "with `zoo data caption ... --val-episodes N`, or set "
+                    f"data.init_args.val_split={hp.test_split} to accept that (smoke runs)"
+                )
             return "val"
-        rank_zero_warn(
-            f"{self.hparams.root} has no val split: validating on {self.hparams.test_split!r}, so "
-            "a checkpoint chosen by validation is chosen on the test episodes "
-            "(make one with zoo data caption --val-episodes N)"
-        )
-        return self.hparams.test_split
+        if hp.val_split == hp.test_split:
+            rank_zero_warn(
+                f"data.init_args.val_split={hp.val_split!r} is the test split: a checkpoint chosen "
+                "by validation is chosen on the test episodes, so its test scores are optimistic"
+            )
+        return hp.val_split
 
     def val_dataloader(self) -> DataLoader:
         return self._loader(self.val_split, train=False)
@@ -189,4 +168,4 @@ class CrafterCaptionDataModule(L.LightningDataModule):
         return self._loader(self.hparams.test_split, train=False)
 
 
-__all__ = ["CrafterCaptionDataModule", "SeededShuffle", "collate_clips", "check_manifest_captions"]
+__all__ = ["CrafterCaptionDataModule", "check_manifest_captions"]

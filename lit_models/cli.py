@@ -7,6 +7,7 @@ C-CLIP and the rest share this one entry point.
 from __future__ import annotations
 
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -73,18 +74,26 @@ def run_lightning_cli(argv: list[str]) -> LightningCLI:
     """Run ``zoo fit|validate|test|predict ARGS`` (argv starts with the verb); ``predict``
     writes its outputs to ``<run dir>/predictions/*.npz``."""
     predicting = bool(argv) and argv[0] == "predict"
-    cli = ZooCLI(
-        L.LightningModule,
-        L.LightningDataModule,
-        subclass_mode_model=True,
-        subclass_mode_data=True,
-        save_config_callback=WandbSaveConfigCallback,
-        save_config_kwargs={"overwrite": True},
-        auto_configure_optimizers=False,
-        trainer_defaults={"callbacks": [NpzPredictionWriter()]} if predicting else None,
-        args=argv,
-        run=True,
-    )
+    try:
+        cli = ZooCLI(
+            L.LightningModule,
+            L.LightningDataModule,
+            subclass_mode_model=True,
+            subclass_mode_data=True,
+            save_config_callback=WandbSaveConfigCallback,
+            save_config_kwargs={"overwrite": True},
+            auto_configure_optimizers=False,
+            trainer_defaults={"callbacks": [NpzPredictionWriter()]} if predicting else None,
+            args=argv,
+            run=True,
+        )
+    except BaseException:
+        # a run that failed must not stay the active W&B run: the next in-process run (a
+        # notebook's retry) would log into it
+        wandb = sys.modules.get("wandb")
+        if wandb is not None and wandb.run is not None:
+            wandb.finish(exit_code=1)
+        raise
     for logger in cli.trainer.loggers:
         if isinstance(logger, WandbLogger):  # the next in-process run gets its own W&B run
             logger.experiment.finish()

@@ -8,6 +8,7 @@ from pathlib import Path
 import lightning as L
 import pytest
 import torch
+import yaml
 from lightning.pytorch.loggers import WandbLogger
 
 from lit_models.cli import run_lightning_cli
@@ -28,7 +29,9 @@ def crafterplay(tmp_path_factory) -> Path:
     return out
 
 
-def _fit(crafterplay: Path, root: Path, max_steps: int, *extra: str):
+def _fit(crafterplay: Path, root: Path, max_steps: int, *extra: str, wandb: bool = False):
+    """An in-process `zoo fit` of the smoke config; W&B (a service start each, up to a minute on
+    a loaded machine) only in the one test that checks it."""
     return run_lightning_cli([
         "fit", f"--config={CONFIG}", f"--trainer.default_root_dir={root}",
         f"--trainer.max_steps={max_steps}", "--trainer.limit_val_batches=1",
@@ -36,7 +39,7 @@ def _fit(crafterplay: Path, root: Path, max_steps: int, *extra: str):
         "--data.init_args.seq_len=8", "--data.init_args.batch_size=2",
         "--data.init_args.num_workers=0", "--data.init_args.val_fraction=0.3",
         "--data.init_args.train_batches_per_epoch=2", "--model.init_args.tbptt_len=4",
-        "--model.init_args.memory_len=4", *extra,
+        "--model.init_args.memory_len=4", *([] if wandb else ["--trainer.logger=false"]), *extra,
     ])
 
 
@@ -50,12 +53,16 @@ def test_fit_writes_run_folder_and_resumes_at_the_same_step(
     monkeypatch.setattr(
         WandbLogger, "log_hyperparams", lambda self, p: (logged.append(dict(p)), log_hyperparams(self, p))
     )
-    first = _fit(crafterplay, tmp_path, 2)
+    first = _fit(crafterplay, tmp_path, 2, wandb=True)
     assert first.trainer.global_step == 2
     (run_dir,) = tmp_path.iterdir()
     assert (run_dir / "config.yaml").is_file() and (run_dir / "wandb").is_dir()
     last = run_dir / "checkpoints" / "last.ckpt"
-    assert torch.load(last, weights_only=True)["global_step"] == 2
+    saved = torch.load(last, weights_only=True)
+    assert saved["global_step"] == 2
+    # the config file's width and the command line's override, as the checkpoint rebuilds them
+    hparams = saved["hyper_parameters"]
+    assert (hparams["d_model"], hparams["memory_len"], hparams["tbptt_len"]) == (64, 4, 4)
     assert any(p.name.startswith("best-") for p in (run_dir / "checkpoints").iterdir())
     full_configs = [p["config"] for p in logged if "config" in p]
     assert full_configs[0]["model"]["class_path"] == "lit_models.cvpt.CVPT"
@@ -108,7 +115,9 @@ def test_every_shipped_config_parses_and_builds(config: Path) -> None:
             "--trainer.precision=32",
         ],
     )
-    assert cli.model.hparams  # save_hyperparameters(): checkpoints rebuild the model alone
+    # save_hyperparameters() keeps every value the file sets: checkpoints rebuild the model alone
+    init_args = yaml.safe_load(config.read_text())["model"]["init_args"]
+    assert {k: cli.model.hparams.get(k, "<missing>") for k in init_args} == init_args
     assert cli.datamodule.hparams["root"].startswith("data/")
 
 
@@ -151,3 +160,55 @@ def test_two_runs_started_in_the_same_second_get_their_own_folders(
     third = cli._new_run_dir(tmp_path)
     assert len({first, second, third}) == 3 and not first.exists()
     assert third.name == f"20260101-000000-{os.getpid()}-3"
+
+
+def _last_checkpoint(root: Path) -> dict:
+    (run,) = root.iterdir()
+    return torch.load(run / "checkpoints" / "last.ckpt", weights_only=True)
+
+
+def test_fits_with_one_seed_are_bit_identical_and_other_seeds_differ(
+    crafterplay: Path, tmp_path: Path
+) -> None:
+    # seed_everything fixes the initial weights and (through the datamodule) the order of the
+    # shard and sequence shuffles: the same seed must give the same weights, bit for bit.
+    for name, seed in (("a", 0), ("b", 0), ("c", 1)):
+        _fit(crafterplay, tmp_path / name, 3, f"--seed_everything={seed}")
+    a, b, c = (_last_checkpoint(tmp_path / name)["state_dict"] for name in "abc")
+    torch.testing.assert_close(b, a, rtol=0, atol=0)
+    assert any(not torch.equal(a[k], c[k]) for k in a)
+
+
+def test_fit_with_the_data_order_alone_changed_ends_elsewhere(
+    crafterplay: Path, tmp_path: Path
+) -> None:
+    # The same initial weights (seed_everything) but another data seed: the weights after 3
+    # steps differ, so the bit-identical fits above did depend on the data order being seeded.
+    for name, data_seed in (("a", 0), ("b", 1)):
+        _fit(crafterplay, tmp_path / name, 3, f"--data.init_args.seed={data_seed}")
+    a, b = (_last_checkpoint(tmp_path / name)["state_dict"] for name in "ab")
+    assert any(not torch.equal(a[k], b[k]) for k in a)
+
+
+def test_fit_resumed_from_last_ckpt_ends_like_a_straight_fit(crafterplay: Path, tmp_path: Path) -> None:
+    """2 steps, then --ckpt_path=last.ckpt on to 3, against a straight 3-step fit: the same
+    parameters, optimizer state and LR schedule, bit for bit (CPU, no dropout)."""
+    # An epoch is train_batches_per_epoch=2 batches; last.ckpt is written by the validation at
+    # the end of epoch 0 (step 2), and the resumed fit starts epoch 1 with a new iterator whose
+    # shuffles are seeded by (seed, epoch 1), so its step 3 is the straight fit's step 3 batch.
+    # The cosine length is fixed at the full run's 3 steps: the interrupted fit is the same run.
+    same = ("--model.init_args.cosine_steps=3",)
+    _fit(crafterplay, tmp_path / "straight", 3, *same)
+    _fit(crafterplay, tmp_path / "interrupted", 2, *same)
+    (interrupted,) = (tmp_path / "interrupted").iterdir()
+    first_part = interrupted / "checkpoints" / "last.ckpt"
+    assert torch.load(first_part, weights_only=True)["global_step"] == 2
+    _fit(crafterplay, tmp_path / "resumed", 3, *same, f"--ckpt_path={first_part}")
+
+    a, b = (_last_checkpoint(tmp_path / run) for run in ("straight", "resumed"))
+    assert a["global_step"] == b["global_step"] == 3
+    torch.testing.assert_close(b["state_dict"], a["state_dict"], rtol=0, atol=0)
+    (opt_a,), (opt_b,) = a["optimizer_states"], b["optimizer_states"]
+    torch.testing.assert_close(opt_b["state"], opt_a["state"], rtol=0, atol=0)
+    assert opt_b["param_groups"] == opt_a["param_groups"]
+    assert b["lr_schedulers"] == a["lr_schedulers"]

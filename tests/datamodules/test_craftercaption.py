@@ -7,7 +7,8 @@ import pytest
 import torch
 import zstandard
 
-from datamodules.craftercaption import CrafterCaptionDataModule, SeededShuffle
+from datamodules.craftercaption import CrafterCaptionDataModule
+from datamodules.seeded_shuffle import SeededShuffle
 from zoo.captions.dataset import EpisodeInfo, _encode_sample, _write_tar
 from zoo.captions.vocabulary import load_vocabulary
 
@@ -63,24 +64,25 @@ def test_batches_have_the_documented_fields(caption_root):
 
 def test_validation_reads_every_held_out_clip_once_in_order(caption_root):
     module = CrafterCaptionDataModule(str(caption_root), eval_batch_size=3, num_workers=0)
-    batches = list(module.val_dataloader())
+    batches = list(module.test_dataloader())
     assert [len(b["caption_id"]) for b in batches] == [3, 3, 1]  # partial last batch kept
     assert clip_numbers(batches) == list(range(30, 37))
 
 
 def test_training_pass_is_shuffled_complete_and_reproducible(caption_root):
-    module = CrafterCaptionDataModule(
-        str(caption_root), batch_size=5, num_workers=0, shuffle_buffer=8
-    )
+    def epochs(seed: int, first_epoch: int = 0, count: int = 1) -> list[list[int]]:
+        module = CrafterCaptionDataModule(
+            str(caption_root), batch_size=5, num_workers=0, shuffle_buffer=8, seed=seed
+        )
+        stream = module.dataset("train", train=True, first_epoch=first_epoch)
+        return [clip_numbers(stream) for _ in range(count)]
 
-    def one_pass(seed: int) -> list[int]:
-        torch.manual_seed(seed)
-        return clip_numbers(module.dataset("train", train=True))
-
-    first = one_pass(0)
-    assert sorted(first) == list(range(30)) and first != list(range(30))
-    assert one_pass(0) == first
-    assert one_pass(1) != first
+    first, second = epochs(0, count=2)
+    assert sorted(first) == sorted(second) == list(range(30))
+    assert first != list(range(30)) and first != second  # shuffled, anew each epoch
+    assert epochs(0, count=2) == [first, second]
+    assert epochs(1)[0] != first
+    assert epochs(0, first_epoch=1) == [second]  # a run resumed at epoch 1
 
 
 def test_with_epoch_repeats_the_stream_to_the_requested_number_of_batches(caption_root):
@@ -103,10 +105,12 @@ def test_workers_split_the_shards(caption_root):
 
 def test_seeded_shuffle_keeps_every_item_and_changes_order_per_pass():
     shuffle = SeededShuffle(bufsize=4, salt=0)
-    torch.manual_seed(3)
+    shuffle.start_epoch(seed=3, epoch=0)
     first, second = list(shuffle(iter(range(20)))), list(shuffle(iter(range(20))))
     assert sorted(first) == sorted(second) == list(range(20))
     assert first != second
+    shuffle.start_epoch(seed=3, epoch=0)  # the same seed and epoch replay the same passes
+    assert [list(shuffle(iter(range(20)))) for _ in range(2)] == [first, second]
 
 
 def test_manifest_with_other_captions_is_rejected(tmp_path):
@@ -129,5 +133,8 @@ def test_validation_reads_the_val_split_when_there_is_one(caption_root, tmp_path
     assert module.val_split == "val"
     assert len(clip_numbers(module.val_dataloader())) == 3
     without = CrafterCaptionDataModule(str(caption_root), num_workers=0)
-    with pytest.warns(UserWarning, match="no val split: validating on 'test'"):
-        assert without.val_split == "test"
+    with pytest.raises(ValueError, match=r"no 'val' split.*--val-episodes.*val_split=test"):
+        without.val_dataloader()
+    on_test = CrafterCaptionDataModule(str(caption_root), num_workers=0, val_split="test")
+    with pytest.warns(UserWarning, match="val_split='test' is the test split"):
+        assert on_test.val_split == "test"

@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import re
+import shutil
+import tarfile
 from collections import Counter
 from pathlib import Path
 
+import lightning as L
 import numpy as np
 import pytest
 import torch
 
 from datamodules.crafterplay import CrafterPlayDataModule, episode_split
+from datamodules.seeded_shuffle import seeded_loader
 from zoo.data.generate import GenerationConfig, generate
-from zoo.data.reader import filter_noops, iter_chunks, list_shards
+from zoo.data.reader import CorruptShardError, filter_noops, iter_chunks, list_shards
 
 NUM_EPISODES = 8
 
@@ -108,3 +113,72 @@ def test_bad_fractions_and_missing_data_are_clear_errors(tmp_path: Path) -> None
         CrafterPlayDataModule(str(tmp_path), val_fraction=0.5, test_fraction=0.5)
     with pytest.raises(FileNotFoundError, match="manifest.json"):
         _module(tmp_path).dataset("train")
+
+
+def _order(loader, epochs: int) -> list[list[tuple]]:
+    """(episode, step) of each sequence's first step, per epoch, in batch order."""
+    return [
+        [(int(e[0]), int(s[0])) for batch in loader for e, s in zip(batch["episode"], batch["step"])]
+        for _ in range(epochs)
+    ]
+
+
+def test_training_order_follows_the_seed_and_the_epoch(crafterplay: Path) -> None:
+    kwargs = dict(seq_len=8, batch_size=2, val_fraction=0.0, test_fraction=0.0, shuffle_buffer=8)
+    straight = _order(_module(crafterplay, seed=3, **kwargs).train_dataloader(), 3)
+    assert straight == _order(_module(crafterplay, seed=3, **kwargs).train_dataloader(), 3)
+    assert straight[0] != straight[1] != straight[2]  # each epoch its own order
+    assert {e for e, _ in straight[0]} == {e for e, _ in straight[1]}  # of the same episodes
+    assert _order(_module(crafterplay, seed=4, **kwargs).train_dataloader(), 1)[0] != straight[0]
+    # a run resumed at epoch 1 sees what the straight run saw from epoch 1 on
+    resumed = _module(crafterplay, seed=3, **kwargs)
+    assert _order(seeded_loader(resumed.dataset("train", first_epoch=1), 0, False), 2) == straight[1:]
+
+
+def test_seed_everything_sets_the_order_when_no_seed_is_given(crafterplay: Path) -> None:
+    kwargs = dict(seq_len=8, batch_size=2, val_fraction=0.0, test_fraction=0.0, shuffle_buffer=8)
+    orders = []
+    for seed in (5, 5, 6):
+        L.seed_everything(seed)
+        orders.append(_order(_module(crafterplay, **kwargs).train_dataloader(), 1)[0])
+    assert orders[0] == orders[1] != orders[2]
+
+
+def test_worker_processes_are_spawned_and_keep_the_seeded_order(crafterplay: Path) -> None:
+    # JAX runs threads, and a forked child of a threaded process can deadlock: workers are
+    # spawned; they persist so the epoch count (and the order) carries across epochs.
+    kwargs = dict(seq_len=8, batch_size=2, val_fraction=0.0, test_fraction=0.0, num_workers=2)
+    loader = _module(crafterplay, seed=3, **kwargs).train_dataloader()
+    assert loader.multiprocessing_context.get_start_method() == "spawn"
+    assert loader.persistent_workers
+    first = _order(loader, 2)
+    assert first[0] != first[1]
+    assert _order(_module(crafterplay, seed=3, **kwargs).train_dataloader(), 2) == first
+
+
+def _cut_shard(crafterplay: Path, tmp_path: Path, where: str) -> tuple[Path, str]:
+    """A copy of the dataset whose shard 1 (episodes 2 and 3) is cut inside a tar member, or
+    exactly where its last episode begins (a cut that leaves a valid tar of whole episodes)."""
+    root = tmp_path / where
+    shutil.copytree(crafterplay, root)
+    shard = list_shards(root)[1]
+    with tarfile.open(shard) as tar:
+        last_episode = [m for m in tar.getmembers() if m.name.startswith("e0000003_")]
+    cut = last_episode[0].offset if where == "between-episodes" else last_episode[0].offset_data + 7
+    Path(shard).write_bytes(Path(shard).read_bytes()[:cut])
+    return root, shard
+
+
+@pytest.mark.parametrize("where", ["inside-a-member", "between-episodes"])
+def test_corrupt_shard_met_in_training_is_named_or_skipped(
+    crafterplay: Path, tmp_path: Path, where: str
+) -> None:
+    root, shard = _cut_shard(crafterplay, tmp_path, where)
+    kwargs = dict(seq_len=4, noop_filter=False, val_fraction=0.0, test_fraction=0.0)
+    with pytest.raises(CorruptShardError, match=re.escape(shard)):
+        list(_module(root, **kwargs).train_dataloader())
+
+    warning = rf"skipped corrupt shard {re.escape(shard)} \(1 skipped so far"
+    with pytest.warns(UserWarning, match=warning):
+        read = {e for e, _ in _order(_module(root, skip_corrupt=True, **kwargs).train_dataloader(), 1)[0]}
+    assert read == set(range(NUM_EPISODES)) - {3}  # episode 2, read before the cut, is kept

@@ -129,7 +129,7 @@ def test_fit_validate_and_reload_from_checkpoint(caption_root, tmp_path):
     module = smoke_module(lr=5e-4, warmup_steps=2)
     data = CrafterCaptionDataModule(
         str(caption_root), batch_size=8, eval_batch_size=35, num_workers=0, shuffle_buffer=16,
-        train_batches_per_epoch=4,
+        train_batches_per_epoch=4, val_split="test",  # the fake set has no val split
     )  # fmt: skip
     settings = dict(
         accelerator="cpu", logger=False, enable_checkpointing=False, enable_progress_bar=False,
@@ -160,19 +160,18 @@ def test_fit_validate_and_reload_from_checkpoint(caption_root, tmp_path):
         torch.testing.assert_close(plain.encode_video(clips), module.model.encode_video(clips))
 
 
-def test_smoke_config_runs_through_the_lightning_cli(caption_root, tmp_path, monkeypatch):
+def test_smoke_config_runs_through_the_lightning_cli(caption_root, tmp_path):
     from lit_models.cli import run_lightning_cli
 
-    monkeypatch.setenv("WANDB_MODE", "offline")
-    monkeypatch.setenv("WANDB_DIR", str(tmp_path))
+    # W&B is checked once, in tests/test_lightning_cli.py; the fake set has no val split
     cli = run_lightning_cli(
         [
             "fit", "--config", str(REPO / "configs" / "cclip_smoke.yaml"),
             "--trainer.max_steps=2", "--trainer.val_check_interval=2",
             "--trainer.limit_val_batches=1", f"--trainer.default_root_dir={tmp_path}",
-            "--trainer.enable_progress_bar=false",
+            "--trainer.enable_progress_bar=false", "--trainer.logger=false",
             f"--data.init_args.root={caption_root}", "--data.init_args.num_workers=0",
-            "--data.init_args.batch_size=4",
+            "--data.init_args.batch_size=4", "--data.init_args.val_split=test",
         ]
     )  # fmt: skip
     assert isinstance(cli.model, CCLIP) and cli.trainer.global_step == 2

@@ -161,7 +161,17 @@ def test_init_weights_starts_a_new_run_from_a_finished_one(tmp_path: Path) -> No
     path.rename(tmp_path / "gone.ckpt")
     again = tmp_path / "follow_up.ckpt"
     follow_up.trainer.save_checkpoint(again)
-    CVPT.load_from_checkpoint(again)
+    reloaded = CVPT.load_from_checkpoint(again).eval()
+    follow_up.eval()
+    # the follow-up's own trained weights, not those it started from
+    assert not torch.equal(reloaded.model.policy_head.weight, trained.model.policy_head.weight)
+    ours, theirs = reloaded.state_dict(), follow_up.state_dict()
+    assert ours.keys() == theirs.keys()
+    for name in ours:
+        assert torch.equal(ours[name], theirs[name]), name
+    with torch.no_grad():
+        expected = follow_up(batch["frames"], batch["first"])
+        assert torch.equal(reloaded(batch["frames"], batch["first"]), expected)
 
     with pytest.raises(FileNotFoundError, match="model.init_weights=.*gone-too"):
         CVPT(**SMALL, init_weights=str(tmp_path / "gone-too.ckpt")).setup("fit")

@@ -103,7 +103,11 @@ def _check_order(chunk: dict, expected: dict | None, url: str) -> dict | None:
 
 def _shard_chunks(url: str) -> Iterator[dict]:
     """Chunks of one shard; any read/decode failure becomes CorruptShardError naming it."""
-    dataset = wds.WebDataset([url], shardshuffle=False, empty_check=False).map(decode_sample)
+    # One named shard, read whole: no node/worker splitting here (inside a DataLoader worker
+    # WebDataset's default splitter would hand this lone shard to worker 0 only).
+    dataset = wds.WebDataset(
+        [url], shardshuffle=False, empty_check=False, nodesplitter=None, workersplitter=None
+    ).map(decode_sample)
     expected = None
     iterator = iter(dataset)
     while True:

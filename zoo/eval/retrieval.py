@@ -4,18 +4,21 @@ The candidate set, precisely: held-out clips are cut, in data order, into groups
 `group_size` (64) consecutive clips; within a group every clip is a query and the group's 64
 captions (each clip's own caption text, duplicates kept) are the candidates. CrafterCaption has
 only 61 template captions, so a group usually holds several clips with the same caption id; any
-candidate with the query's caption id counts as a correct answer. A query's rank is 1 + the
-number of candidates with another caption id that score strictly higher than its best-scoring
-correct candidate; R@k is the fraction of queries with a correct candidate in the top k
-(torchmetrics' hit rate, which is recall when each query has exactly one correct candidate),
-MeanR the mean rank. A trailing group shorter than `group_size` is dropped so every query
-competes against the same number of candidates.
+candidate with the query's caption id counts as a correct answer.
+
+A query's rank is 1 + the number of candidates with another caption id that score *at least* as
+high as its best-scoring correct candidate: ties are broken against the model (pessimistically),
+so a collapsed model whose embeddings are all equal ranks every query last, not first. R@k is the
+fraction of queries whose rank is <= k and MeanR the mean rank; both come from the same ranks, so
+they cannot disagree about a tie. (torchmetrics' hit rate breaks ties by sort order, arbitrarily:
+on an all-equal matrix it gave R@1 ~ 3% while a strict ">" rank gave MeanR = 1.) A trailing group
+shorter than `group_size` is dropped so every query competes against the same number of
+candidates.
 """
 
 from collections.abc import Sequence
 
 import torch
-from torchmetrics.retrieval import RetrievalHitRate
 
 DEFAULT_TOP_KS = (1, 5, 10)
 
@@ -23,12 +26,12 @@ DEFAULT_TOP_KS = (1, 5, 10)
 def best_correct_rank(
     similarity: torch.Tensor, query_ids: torch.Tensor, candidate_ids: torch.Tensor
 ) -> torch.Tensor:
-    """(Q,) 1-based rank of each query's best-scoring correct candidate."""
+    """(Q,) 1-based rank of each query's best-scoring correct candidate, ties counted against it."""
     correct = query_ids[:, None] == candidate_ids[None, :]
     if not bool(correct.any(dim=1).all()):
         raise ValueError("every query needs at least one candidate with its own caption id")
     best_correct = similarity.masked_fill(~correct, float("-inf")).max(dim=1, keepdim=True).values
-    return 1 + ((similarity > best_correct) & ~correct).sum(dim=1)
+    return 1 + ((similarity >= best_correct) & ~correct).sum(dim=1)
 
 
 def retrieval_metrics(
@@ -86,24 +89,13 @@ def _metrics_from_blocks(
     candidate_ids: list[torch.Tensor],
     top_ks: Sequence[int],
 ) -> dict[str, float]:
-    hit_rates = {k: RetrievalHitRate(top_k=k) for k in top_ks}
-    ranks = []
-    first_query = 0
-    for similarity, queries, candidates in zip(similarities, query_ids, candidate_ids, strict=True):
-        similarity = similarity.detach().float().cpu()
-        queries, candidates = queries.cpu(), candidates.cpu()
-        ranks.append(best_correct_rank(similarity, queries, candidates))
-        num_queries, num_candidates = similarity.shape
-        query_index = torch.arange(first_query, first_query + num_queries)
-        first_query += num_queries
-        correct = queries[:, None] == candidates[None, :]
-        for metric in hit_rates.values():
-            metric.update(
-                similarity.flatten(),
-                correct.flatten(),
-                indexes=query_index.repeat_interleave(num_candidates),
-            )
-    metrics = {f"R@{k}": float(metric.compute()) for k, metric in hit_rates.items()}
-    metrics["MeanR"] = float(torch.cat(ranks).float().mean())
-    metrics["queries"] = float(first_query)
+    ranks = torch.cat([
+        best_correct_rank(similarity.detach().float().cpu(), queries.cpu(), candidates.cpu())
+        for similarity, queries, candidates in zip(
+            similarities, query_ids, candidate_ids, strict=True
+        )
+    ]).float()
+    metrics = {f"R@{k}": float((ranks <= k).float().mean()) for k in top_ks}
+    metrics["MeanR"] = float(ranks.mean())
+    metrics["queries"] = float(len(ranks))
     return metrics

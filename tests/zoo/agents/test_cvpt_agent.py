@@ -144,14 +144,27 @@ def test_zoo_eval_plays_a_checkpoint_without_agent_name(checkpoint, tmp_path: Pa
     assert report["agent"] == "cvpt" and report["episodes"] == 2
 
 
-def test_temperature_zero_plays_the_most_likely_action(checkpoint) -> None:
+def test_temperature_shapes_the_sampled_distribution(checkpoint, monkeypatch) -> None:
+    """Actions follow softmax(logits / T); T = 0 always plays the argmax."""
     from zoo.agents import load_checkpoint_agent
 
-    path, _ = checkpoint
-    greedy = load_checkpoint_agent(path, 2, temperature=0)
-    assert greedy.policy.greedy
-    cool = load_checkpoint_agent(path, 2, temperature=0.5)
-    assert (cool.policy.greedy, cool.policy.temperature) == (False, 0.5)
+    n = 500
+    logits = torch.linspace(-2.0, 2.0, 17).repeat(n, 1)  # spread: T = 0.5, 1 and 2 differ
+    frames = np.broadcast_to(np.zeros((144, 144, 3), np.uint8), (n, 144, 144, 3))
+    uniforms = (np.arange(n) + 0.5) / n  # an even grid: frequencies are the CDF's steps
+    for temperature in (0.5, 2.0):
+        policy = load_checkpoint_agent(checkpoint[0], n, temperature=temperature).policy
+        monkeypatch.setattr(policy, "logits", lambda frames, state, first=None: (logits, state))
+        actions, _ = policy.act(frames, policy.initial_state(n), uniforms=uniforms)
+        frequencies = np.bincount(actions, minlength=17) / n
+        expected = torch.softmax(logits[0] / temperature, -1).numpy()
+        np.testing.assert_allclose(frequencies, expected, atol=1 / n + 1e-6)
+
+    agent = load_checkpoint_agent(checkpoint[0], n, temperature=0)
+    monkeypatch.setattr(agent.policy, "logits", lambda frames, state, first=None: (logits, state))
+    agent.reset(np.arange(n))  # n different sampling streams, all ignored
+    step = Step(frames, {}, np.zeros(n, np.float32), np.zeros(n, bool))
+    assert (agent.act(step) == 16).all()
 
 
 def test_plain_act_from_initial_state_needs_no_flags(checkpoint) -> None:

@@ -1,19 +1,36 @@
-"""Generation: bit-exact replay, determinism, resume after a kill, refusal to mix datasets.
+"""Generation: bit-exact replay, determinism, resume after a kill, refusal to mix datasets,
+worker processes that fail.
 
-Byte-level determinism is checked on Craftax: original crafter picks which mob to despawn
-from a set ordered by memory address, so its episodes are not reproducible from the seed.
+Runs with worker processes use crafter (made reproducible from the seed in zoo.envs) and the
+random expert: a spawned worker then imports neither JAX nor Craftax and starts in about a
+second, where a Craftax worker would spend ~20 s compiling.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from zoo.data.generate import GenerationConfig, ShardGenerator, episode_seed, generate
+from zoo.data.generate import (
+    GenerationConfig,
+    ShardGenerator,
+    WorkerError,
+    episode_seed,
+    generate,
+)
 from zoo.data.manifest import DatasetMismatchError, load_manifest
 from zoo.data.reader import iter_chunks, iter_episodes, list_shards
 from zoo.envs.schema import STATE_FIELDS
@@ -23,6 +40,8 @@ CRAFTER = GenerationConfig(
     chunk_length=16, max_steps=40,
 )
 CRAFTAX = dataclasses.replace(CRAFTER, env="craftax", seed=3, chunk_length=8, max_steps=20)
+# three shards, so two workers each take a second one once their first is done
+THREE_SHARDS = dataclasses.replace(CRAFTER, episodes=5)
 
 
 def _shas(root) -> list[str]:
@@ -31,6 +50,58 @@ def _shas(root) -> list[str]:
 
 def _finished_episodes(root) -> list[int]:
     return [c["meta"]["episode"] for c in iter_chunks(list_shards(root)) if c["meta"]["last"]]
+
+
+def _entries(root) -> list[dict]:
+    """Manifest entries in shard order (workers finish shards in any order)."""
+    return sorted(load_manifest(root)["shards"], key=lambda e: e["index"])
+
+
+def _assert_same_dataset(root: Path, reference: Path) -> None:
+    """Same files (no leftovers), same shard bytes, same manifest entries."""
+    names = sorted(p.name for p in reference.iterdir())
+    assert sorted(p.name for p in root.iterdir()) == names
+    for name in names:
+        if name.endswith(".tar"):
+            assert (root / name).read_bytes() == (reference / name).read_bytes(), name
+    assert _entries(root) == _entries(reference)
+
+
+def _assert_kept_shards_are_intact(root: Path, reference: Path, failed: int) -> None:
+    """After a failed run: at least one finished shard is in the manifest, none is the failed
+    one, and each is byte-identical to the uninterrupted run's."""
+    kept = _entries(root)
+    assert kept and failed not in [e["index"] for e in kept]
+    for entry in kept:
+        name = entry["file"]
+        assert (root / name).read_bytes() == (reference / name).read_bytes(), name
+
+
+@contextmanager
+def _deadline(seconds: int) -> Iterator[None]:
+    """Turn a hang of the main thread into a TimeoutError (SIGALRM)."""
+
+    def expire(signum, frame):
+        raise TimeoutError(f"still running after {seconds} s: the run hangs")
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def _poll(found: Callable[[], list], seconds: float, running: Callable[[], bool]) -> list:
+    """Poll ``found`` every 2 ms until it returns something, ``running`` turns False or time
+    is up (both fail the test)."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline and running():
+        if hits := found():
+            return hits
+        time.sleep(0.002)
+    pytest.fail("the run ended, or never got there, before the moment to kill it")
 
 
 @pytest.fixture(scope="module")
@@ -105,9 +176,74 @@ def test_same_bytes_with_worker_processes(craftax_dataset, tmp_path):
     assert _shas(tmp_path) == _shas(craftax_dataset)
 
 
-def test_worker_processes_write_every_episode_once(tmp_path):
-    generate(CRAFTER, tmp_path, workers=2, num_envs=1, progress=False)
-    assert _finished_episodes(tmp_path) == [0, 1, 2]
+@pytest.fixture(scope="module")
+def three_shards_dataset(tmp_path_factory):
+    """The uninterrupted single-process run the worker tests compare against."""
+    root = tmp_path_factory.mktemp("crafterplay_three")
+    generate(THREE_SHARDS, root, num_envs=2, progress=False)
+    return root
+
+
+def test_same_bytes_with_worker_processes_on_crafter(three_shards_dataset, tmp_path):
+    generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False)
+    _assert_same_dataset(tmp_path, three_shards_dataset)
+    assert _finished_episodes(tmp_path) == [0, 1, 2, 3, 4]
+
+
+def test_resume_after_the_command_is_killed_mid_shard(crafter_dataset, tmp_path):
+    """SIGKILL to a `zoo data generate --workers 2` run (parent and workers) while a worker
+    has part of a shard on disk; rerunning the same command gives the uninterrupted bytes."""
+    root = tmp_path / "killed"
+    command = [
+        sys.executable, "-m", "zoo.cli", "data", "generate", "--expert", CRAFTER.expert,
+        "--env", CRAFTER.env, "--episodes", str(CRAFTER.episodes), "--seed", str(CRAFTER.seed),
+        "--episodes-per-shard", str(CRAFTER.episodes_per_shard),
+        "--chunk-length", str(CRAFTER.chunk_length), "--max-steps", str(CRAFTER.max_steps),
+        "--workers", "2", "--num-envs", "1", "--no-progress", "--out", str(root),
+    ]
+    run = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL)
+    try:
+        # a compressed chunk or finished episode in a work folder, or a shard being assembled
+        _poll(lambda: [*root.glob(".work-*/*"), *root.glob("*.tar.tmp-*")], 60,
+              lambda: run.poll() is None)
+    finally:
+        os.killpg(run.pid, signal.SIGKILL)  # no process of the group runs user code after this
+        run.wait()
+    assert [*root.glob(".work-*"), *root.glob("*.tar.tmp-*")]
+    rerun = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert rerun.returncode == 0, rerun.stderr
+    _assert_same_dataset(root, crafter_dataset)
+
+
+def test_a_worker_that_raises_fails_the_run_naming_its_shard(three_shards_dataset, tmp_path):
+    (tmp_path / "crafterplay-000002.tar").mkdir()  # shard 2's final rename fails in its worker
+    with _deadline(60), pytest.raises(WorkerError, match="shard 2: worker process") as failed:
+        generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False)
+    assert "IsADirectoryError" in str(failed.value)  # the worker's traceback
+    _assert_kept_shards_are_intact(tmp_path, three_shards_dataset, failed=2)
+    (tmp_path / "crafterplay-000002.tar").rmdir()
+    generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False)
+    _assert_same_dataset(tmp_path, three_shards_dataset)
+
+
+def test_a_killed_worker_fails_the_run_and_a_rerun_finishes_it(three_shards_dataset, tmp_path):
+    """A worker SIGKILLed mid-shard (as by the OOM killer) must end the run, not hang it."""
+    killed: list[int] = []
+
+    def kill_shard_2_worker() -> None:
+        work = _poll(lambda: list(tmp_path.glob(".work-000002-*")), 60, lambda: True)
+        killed.append(int(work[0].name.rsplit("-", 1)[1]))
+        os.kill(killed[0], signal.SIGKILL)
+
+    killer = threading.Thread(target=kill_shard_2_worker, daemon=True)
+    killer.start()
+    with _deadline(60), pytest.raises(WorkerError) as failed:
+        generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False)
+    killer.join()
+    assert f"shard 2: worker process {killed[0]} died (exit code -9)" in str(failed.value)
+    _assert_kept_shards_are_intact(tmp_path, three_shards_dataset, failed=2)
+    generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False)
+    _assert_same_dataset(tmp_path, three_shards_dataset)
 
 
 def test_resume_after_kill_gives_the_same_dataset(craftax_dataset, craftax_generator, tmp_path):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from zoo.data.noop import filter_noops, noop_counts, noop_flags, noop_runs
-from zoo.envs.constants import Action, Block, Item, Mob
+from zoo.envs.constants import Achievement, Action, Block, Item, Mob
 from zoo.envs.schema import empty_state
 
 
@@ -81,25 +81,48 @@ def _pair(n: int):
 
 def test_noop_flags_on_constructed_states():
     cases = {}
-    before, after = _pair(9)
+    before, after = _pair(5)
     cases[0] = (Action.NOOP, True)
-    cases[1] = (Action.DO, True)  # facing sand, nothing changes
-    before["map"][1, 10, 11] = after["map"][1, 10, 11] = int(Block.SAND)
-    cases[2] = (Action.DO, False)
-    after["inventory"][2, Item.WOOD] = 1  # collected something
-    cases[3] = (Action.DO, False)
-    before["mob_map"][3, 10, 11] = int(Mob.ZOMBIE)  # hits a zombie
-    cases[4] = (Action.PLACE_TABLE, True)  # inventory unchanged: nothing placed
-    cases[5] = (Action.MOVE_LEFT, False)
-    after["player_dir"][5] = int(Action.MOVE_LEFT)  # turned
-    cases[6] = (Action.MOVE_RIGHT, True)  # blocked, already facing right
-    cases[7] = (Action.MOVE_UP, True)
-    before["player_sleeping"][7] = True  # any step while asleep
-    cases[8] = (Action.DO, False)
-    after["player_vitals"][8, 2] = 6  # drank water
-    actions = np.array([int(cases[i][0]) for i in range(9)])
-    expected = [cases[i][1] for i in range(9)]
+    cases[1] = (Action.PLACE_TABLE, True)  # inventory unchanged: nothing placed
+    cases[2] = (Action.MOVE_LEFT, False)
+    after["player_dir"][2] = int(Action.MOVE_LEFT)  # turned
+    cases[3] = (Action.MOVE_RIGHT, True)  # blocked, already facing right
+    cases[4] = (Action.MOVE_UP, True)
+    before["player_sleeping"][4] = True  # any step while asleep
+    actions = np.array([int(cases[i][0]) for i in range(5)])
+    expected = [cases[i][1] for i in range(5)]
     assert noop_flags(actions, before, after).tolist() == expected
+
+
+def test_do_off_grass_is_a_noop_only_when_it_changes_nothing():
+    # Off grass, since DO facing grass is a sapling try and never a noop whatever changed.
+    # Each acting case changes one thing only, so every term of the rule is needed.
+    before, after = _pair(10)
+    before["map"][:, 10, 11] = after["map"][:, 10, 11] = int(Block.SAND)
+    # 0: facing sand, nothing changes
+    before["map"][1, 10, 11] = after["map"][1, 10, 11] = int(Block.TREE)
+    after["inventory"][1, Item.WOOD] = 1  # 1: collected wood
+    for i, mob in ((2, Mob.COW), (3, Mob.ZOMBIE), (4, Mob.SKELETON)):
+        before["mob_map"][i, 10, 11] = int(mob)  # 2-4: hits it
+    before["map"][5, 10, 11] = after["map"][5, 10, 11] = int(Block.WATER)
+    after["player_vitals"][5, 2] = 6  # 5: drank
+    after["player_vitals"][6, 1] = 6  # 6: ate
+    # 7: broke a sapling
+    before["map"][7, 10, 11], after["map"][7, 10, 11] = int(Block.PLANT), int(Block.GRASS)
+    after["achievements"][8, Achievement.EAT_PLANT] = True  # 8: unlocked an achievement
+    before["mob_map"][9, 10, 11] = int(Mob.ARROW)  # 9: an arrow cannot be hit: noop
+    actions = np.full(10, int(Action.DO))
+    assert noop_flags(actions, before, after).tolist() == [True] + [False] * 8 + [True]
+
+
+def test_sleep_is_a_noop_unless_it_puts_the_player_to_sleep():
+    before, after = _pair(3)
+    before["player_vitals"][0, 3] = 3
+    after["player_sleeping"][0] = True  # 0: tired, falls asleep
+    # 1: energy full (9), stays awake
+    before["player_sleeping"][2] = after["player_sleeping"][2] = True  # 2: already asleep
+    actions = np.full(3, int(Action.SLEEP))
+    assert noop_flags(actions, before, after).tolist() == [False, True, True]
 
 
 def test_a_failed_sapling_try_is_not_a_noop():

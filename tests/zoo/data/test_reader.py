@@ -173,12 +173,22 @@ def test_decode_sample_wrong_shape(shards):
 
 
 def test_chunk_encoder_bounds_queued_jobs():
+    # A broken bound must fail, not hang: the first job is always released (leaving the
+    # block shuts the encoder down, which waits for it), every wait has a timeout and the
+    # submitting thread is a daemon, so one stuck forever cannot keep pytest alive.
     release, submitted = threading.Event(), threading.Event()
     with ChunkEncoder(max_pending=1) as encoder:
-        encoder.submit(release.wait)
-        blocked = threading.Thread(target=lambda: (encoder.submit(int), submitted.set()))
-        blocked.start()
-        assert not submitted.wait(0.2)  # the second job waits for the first to finish
-        release.set()
+
+        def submit_second() -> None:
+            encoder.submit(int)
+            submitted.set()
+
+        blocked = threading.Thread(target=submit_second, daemon=True)
+        try:
+            encoder.submit(release.wait, 10)
+            blocked.start()
+            assert not submitted.wait(0.2)  # the second job waits for the first to finish
+        finally:
+            release.set()
         assert submitted.wait(5)
-        blocked.join()
+        blocked.join(5)

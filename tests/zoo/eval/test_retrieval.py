@@ -92,3 +92,28 @@ def test_bad_inputs_are_named():
         retrieval_metrics(torch.zeros(2, 3), ids, ids)
     with pytest.raises(ValueError, match="own caption id"):
         best_correct_rank(torch.zeros(2, 2), torch.tensor([0, 1]), torch.tensor([0, 0]))
+
+
+def test_ties_count_against_the_model():
+    # A collapsed model: every clip and caption embeds to the same vector, so all scores tie.
+    # 4 queries, 4 candidates with distinct ids: each query's correct candidate ties with 3 wrong
+    # ones and ranks last (4), so R@1 = R@3 = 0 and R@4 = 1 (not MeanR = 1 with R@1 ~ 1/4).
+    ids = torch.tensor([0, 1, 2, 3])
+    similarity = torch.ones(4, 4)
+    assert best_correct_rank(similarity, ids, ids).tolist() == [4, 4, 4, 4]
+    metrics = retrieval_metrics(similarity, ids, ids, top_ks=(1, 3, 4))
+    assert metrics == {"R@1": 0.0, "R@3": 0.0, "R@4": 1.0, "MeanR": 4.0, "queries": 4.0}
+    # A partial tie: query 0's correct score 0.5 ties with one wrong candidate -> rank 2.
+    similarity = torch.tensor([[0.5, 0.5, 0.1], [0.2, 0.9, 0.2], [0.3, 0.3, 0.3]])
+    ids = torch.tensor([0, 1, 2])
+    assert best_correct_rank(similarity, ids, ids).tolist() == [2, 1, 3]
+
+
+def test_collapsed_embeddings_in_groups_score_as_chance_or_worse():
+    ids = torch.arange(64) % 61
+    same = F.normalize(torch.ones(64, 8), dim=-1)
+    metrics = grouped_retrieval_metrics(same, same, ids)
+    # ids 0..2 appear twice: those 6 queries tie with 62 wrong candidates (rank 63); the other
+    # 58 tie with 63 (rank 64).
+    assert metrics["MeanR"] == pytest.approx((6 * 63 + 58 * 64) / 64)
+    assert metrics["R@1"] == metrics["R@5"] == metrics["R@10"] == 0.0

@@ -113,9 +113,11 @@ def test_needs_a_table_and_a_furnace_for_iron_tools():
     for done in (Achievement.PLACE_STONE, Achievement.COLLECT_SAPLING, Achievement.PLACE_PLANT):
         state["achievements"][0, done] = True
     assert _act(state, plants_wanted=0) == Action.MAKE_IRON_PICKAXE
-    state["map"][0, 11, 10] = Block.GRASS  # no furnace: go and place one instead
+    # No furnace: place one. Enough stone (9 >= 4), the table is diagonal to the player and
+    # the tile faced (10, 11) is free grass, so it goes down right here.
+    state["map"][0, 11, 10] = Block.GRASS
     state["achievements"][0, Achievement.PLACE_FURNACE] = False
-    assert _act(state, plants_wanted=0) != Action.MAKE_IRON_PICKAXE
+    assert _act(state, plants_wanted=0) == Action.PLACE_FURNACE
 
 
 def test_attacks_an_adjacent_zombie():

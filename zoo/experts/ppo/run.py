@@ -2,9 +2,10 @@
 
 Each block's metrics are printed, appended to ``<out>/metrics.jsonl`` and, when asked, sent to
 W&B (offline unless ``WANDB_MODE`` says otherwise); the first block's ``sps`` includes
-compilation. A resumed run restores parameters and optimizer state from the newest checkpoint
-and starts fresh episodes (env and GRU states are not saved), then runs on to the config's
-total number of updates.
+compilation. A resumed run restores parameters, optimizer state and the rollout state (envs,
+GRU state, episode counters, PRNG key) from the newest checkpoint, so it continues exactly as
+the interrupted run would have, then runs on to the config's total number of updates. A
+checkpoint without a rollout state (an older format) resumes on fresh episodes.
 """
 
 from __future__ import annotations
@@ -26,11 +27,12 @@ from zoo.experts.ppo.checkpoint import (
     list_checkpoints,
     load_opt_state,
     load_params,
+    load_rollout,
     read_meta,
     save_checkpoint,
 )
 from zoo.experts.ppo.config import PPOConfig
-from zoo.experts.ppo.train import EpisodeTally, TrainState, build_trainer, learning_rate
+from zoo.experts.ppo.train import EpisodeTally, Runner, TrainState, build_trainer, learning_rate
 
 LOSS_KEYS = ("loss", "policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac")
 
@@ -112,7 +114,12 @@ def train_ppo(config: PPOConfig, out_dir: str | Path, resume: bool = False,
         runner = trainer.init(jax.random.fold_in(key, start))
         params = load_params(found[-1], runner.train.params)
         opt_state = load_opt_state(found[-1], runner.train.opt_state)
-        runner = runner._replace(train=TrainState(params, opt_state))
+        rollout = load_rollout(found[-1], tuple(runner[1:]))
+        if rollout is not None:
+            runner = Runner(TrainState(params, opt_state), *rollout)
+        else:
+            runner = runner._replace(train=TrainState(params, opt_state))
+            log(f"{found[-1]} holds no rollout state: resuming on fresh episodes")
         log(f"resuming from {found[-1]} (update {start}, {start * config.batch_size:,} env steps)")
     else:
         (out / "config.yaml").write_text(yaml.safe_dump(config.to_dict(), sort_keys=False))
@@ -138,7 +145,8 @@ def train_ppo(config: PPOConfig, out_dir: str | Path, resume: bool = False,
                 wandb_run.log(logged, step=record["env_steps"])
             if update % config.checkpoint_every_updates == 0 or update == config.num_updates:
                 path = save_checkpoint(out, config, update, runner.train.params,
-                                       runner.train.opt_state, config.keep_checkpoints)
+                                       runner.train.opt_state, config.keep_checkpoints,
+                                       rollout=tuple(runner[1:]))
                 log(f"saved {path}")
     if wandb_run is not None:
         wandb_run.finish()

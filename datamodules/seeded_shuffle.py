@@ -1,0 +1,99 @@
+"""Shuffles whose order is a function of the run's seed, the epoch, the rank and the worker.
+
+webdataset's ``shuffle`` seeds itself from the process id and the clock, so ``seed_everything``
+cannot make a run reproducible. Seeding from the DataLoader worker's torch seed (the earlier
+approach) repeats a run from scratch but not a resumed one: Lightning does not checkpoint the
+global RNG, so after ``--ckpt_path`` the workers draw other seeds. Here every shuffle draws from
+``random.Random(f"{seed}:{epoch}:{rank}:{worker}:{salt}:{pass}")``, where the epoch is counted
+by ``EpochSeededStream`` from the trainer's epoch at the time the loader was built: a resumed run
+sees the same order from its first new epoch as a straight one.
+
+The epoch counter lives in the dataset object, so the DataLoader must keep its workers alive
+across epochs (``persistent_workers=True``); with fresh workers each epoch would restart the
+count (``seeded_loader`` builds the loader that way).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import random
+from collections.abc import Iterable, Iterator
+
+from torch.utils.data import DataLoader, IterableDataset
+from webdataset.utils import pytorch_worker_info
+
+
+def run_seed(seed: int | None) -> int:
+    """``seed``, or the one ``seed_everything`` set (``PL_GLOBAL_SEED``), else 0."""
+    if seed is not None:
+        return seed
+    return int(os.environ.get("PL_GLOBAL_SEED", 0))
+
+
+class SeededShuffle:
+    """A shuffle-buffer stage; ``start_epoch`` fixes the order of the passes that follow."""
+
+    def __init__(self, bufsize: int, salt: int) -> None:
+        self.bufsize = bufsize
+        self.salt = salt
+        self.seed = 0
+        self.epoch = 0
+        self.passes = 0
+
+    def start_epoch(self, seed: int, epoch: int) -> None:
+        self.seed, self.epoch, self.passes = seed, epoch, 0
+
+    def __call__(self, items: Iterable) -> Iterator:
+        rank, _, worker, _ = pytorch_worker_info()
+        rng = random.Random(f"{self.seed}:{self.epoch}:{rank}:{worker}:{self.salt}:{self.passes}")
+        self.passes += 1  # a stream repeated within an epoch (with_epoch) reorders each pass
+        buffer: list = []
+        for item in items:
+            if len(buffer) < self.bufsize:
+                buffer.append(item)
+                continue
+            index = rng.randrange(len(buffer))
+            buffer[index], item = item, buffer[index]
+            yield item
+        rng.shuffle(buffer)
+        yield from buffer
+
+
+class EpochSeededStream(IterableDataset):
+    """A pipeline whose every iteration is one epoch: re-seeds its shuffles, then streams."""
+
+    def __init__(
+        self, pipeline: Iterable, shuffles: list[SeededShuffle], seed: int, first_epoch: int = 0
+    ) -> None:
+        self.pipeline = pipeline
+        self.shuffles = shuffles
+        self.seed = seed
+        self.epoch = first_epoch
+
+    def __iter__(self) -> Iterator:
+        for shuffle in self.shuffles:
+            shuffle.start_epoch(self.seed, self.epoch)
+        self.epoch += 1
+        return iter(self.pipeline)
+
+
+def seeded_loader(dataset: IterableDataset, num_workers: int, pin_memory: bool) -> DataLoader:
+    """A DataLoader over a batched stream; workers are spawned and kept across epochs.
+
+    Spawned, not forked: JAX (loaded by the envs and experts) runs threads, and forking a
+    process with threads can deadlock the child. Kept alive: ``EpochSeededStream`` counts
+    epochs in the workers' copies, and a spawn start (re-importing torch) is paid once.
+    """
+    workers = num_workers > 0
+    return DataLoader(
+        dataset,
+        batch_size=None,
+        num_workers=num_workers,
+        pin_memory=pin_memory,
+        multiprocessing_context=multiprocessing.get_context("spawn") if workers else None,
+        persistent_workers=workers,
+    )
+
+
+__all__ = ["EpochSeededStream", "SeededShuffle", "run_seed", "seeded_loader"]

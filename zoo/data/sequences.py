@@ -1,0 +1,138 @@
+"""CrafterPlay as a stream of training sequences: episode splits, shard reading, packing.
+
+The pieces of the CrafterPlay datamodule's pipeline, kept free of Lightning so DataLoader
+workers (spawned, so they import what the pickled pipeline names) start in about a second
+instead of the several seconds ``import lightning`` takes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import warnings
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.data import IterableDataset
+
+from zoo.data.manifest import MANIFEST, load_manifest
+from zoo.data.reader import CorruptShardError, ReadStats, filter_noops, iter_chunks
+
+SPLITS = ("train", "val", "test")
+SEQUENCE_KEYS = ("frames", "actions", "first", "episode", "step")
+
+
+class ShardSources(IterableDataset):
+    """{"url", "episodes"} per shard of a CrafterPlay folder, in index order, from its manifest:
+    the first stage of a webdataset pipeline (like ``SimpleShardList``, plus episode counts)."""
+
+    def __init__(self, root: str | Path) -> None:
+        manifest = load_manifest(root)
+        if manifest is None:
+            raise FileNotFoundError(f"{Path(root) / MANIFEST} not found: not a CrafterPlay folder")
+        entries = sorted(manifest["shards"], key=lambda e: e["index"])
+        self.sources = [
+            {"url": str(Path(root) / e["file"]), "episodes": int(e["episodes"])} for e in entries
+        ]
+
+    def __len__(self) -> int:
+        return len(self.sources)
+
+    def __iter__(self) -> Iterator[dict]:
+        return (dict(source) for source in self.sources)
+
+
+def episode_split(episode: int, val_fraction: float, test_fraction: float, salt: int = 0) -> str:
+    """Deterministic split of an episode: a hash maps it to [0, 1), cut at the fractions."""
+    digest = hashlib.blake2b(f"{salt}:{episode}".encode(), digest_size=8).digest()
+    u = int.from_bytes(digest, "little") / 2**64
+    if u < test_fraction:
+        return "test"
+    if u < test_fraction + val_fraction:
+        return "val"
+    return "train"
+
+
+def _whole_shard(url: str, episodes: int) -> Iterator[dict]:
+    """Chunks of one shard, checked to hold the manifest's episode count.
+
+    ``iter_chunks`` catches a cut inside a tar member or inside an episode; a shard cut exactly
+    between two episodes reads cleanly, and only the manifest knows episodes are missing.
+    """
+    finished = 0
+    for chunk in iter_chunks(url):
+        finished += bool(chunk["meta"]["last"])
+        yield chunk
+    if finished != episodes:
+        raise CorruptShardError(
+            f"{url}: truncated shard: {finished} whole episodes, the manifest lists {episodes}"
+        )
+
+
+def read_shards(sources: Iterable[dict], skip_corrupt: bool) -> Iterator[dict]:
+    """Chunks of each {"url", "episodes"} shard in file order; a corrupt one raises, or is
+    abandoned where it breaks (chunks before that were yielded) with a warning naming it."""
+    stats = ReadStats()
+    for source in sources:
+        try:
+            yield from _whole_shard(source["url"], source["episodes"])
+        except CorruptShardError as err:
+            if not skip_corrupt:
+                raise
+            stats.skipped_shards.append(source["url"])
+            stats.reasons.append(str(err))
+            warnings.warn(
+                f"skipped corrupt shard {source['url']} ({stats.num_skipped} skipped so far in "
+                f"this pass): {stats.reasons[-1]}",
+                stacklevel=1,
+            )
+
+
+def select_split(
+    chunks: Iterable[dict], split: str, val_fraction: float, test_fraction: float, salt: int
+) -> Iterator[dict]:
+    for chunk in chunks:
+        if episode_split(chunk["meta"]["episode"], val_fraction, test_fraction, salt) == split:
+            yield chunk
+
+
+def filter_noop_chunks(chunks: Iterable[dict], min_run: int) -> Iterator[dict]:
+    for chunk in chunks:
+        yield filter_noops(chunk, min_run=min_run)
+
+
+def pack_sequences(chunks: Iterable[dict], seq_len: int) -> Iterator[dict]:
+    """Join consecutive chunks into sequences of exactly ``seq_len`` steps.
+
+    ``first`` is True at the first step of a chunk whose episode differs from the previous
+    chunk's (so at each episode's first kept step). A shorter remainder at the end of the
+    stream is dropped.
+    """
+    pending: dict[str, list[np.ndarray]] = {key: [] for key in SEQUENCE_KEYS}
+    size = 0
+    previous_episode = None
+    for chunk in chunks:
+        n = len(chunk["actions"])
+        if n == 0:
+            continue
+        episode = int(chunk["meta"]["episode"])
+        first = np.zeros(n, dtype=bool)
+        first[0] = episode != previous_episode
+        previous_episode = episode
+        pending["frames"].append(chunk["frames"])
+        pending["actions"].append(np.asarray(chunk["actions"], dtype=np.int64))
+        pending["first"].append(first)
+        pending["episode"].append(np.full(n, episode, dtype=np.int64))
+        in_chunk = chunk.get("step_index", np.arange(n))  # filtered chunks say which steps stayed
+        pending["step"].append(int(chunk["meta"]["offset"]) + np.asarray(in_chunk, np.int64))
+        size += n
+        while size >= seq_len:
+            joined = {key: np.concatenate(parts) for key, parts in pending.items()}
+            yield {key: value[:seq_len].copy() for key, value in joined.items()}
+            pending = {key: [value[seq_len:]] for key, value in joined.items()}
+            size -= seq_len
+
+
+def collate_sequences(samples: list[dict]) -> dict[str, torch.Tensor]:
+    return {key: torch.from_numpy(np.stack([s[key] for s in samples])) for key in SEQUENCE_KEYS}
