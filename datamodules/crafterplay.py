@@ -125,11 +125,14 @@ class CrafterPlayDataModule(L.LightningDataModule):
             pipeline = pipeline.with_epoch(max(1, hp.train_batches_per_epoch // max(1, hp.num_workers)))
         return EpochSeededStream(pipeline, shuffles, run_seed(hp.seed), first_epoch)
 
+    def _trainer_epoch(self) -> int | None:
+        return self.trainer.current_epoch if self.trainer is not None else None
+
     def _loader(self, split: str) -> DataLoader:
-        # a resumed fit builds its loader after the checkpoint restored the epoch
-        first_epoch = self.trainer.current_epoch if self.trainer is not None else 0
+        stream = self.dataset(split)
+        stream.current_epoch = self._trainer_epoch  # a resumed fit: the restored epoch
         return seeded_loader(
-            self.dataset(split, first_epoch),
+            stream,
             self.hparams.num_workers,
             self.hparams.pin_memory and torch.cuda.is_available(),
         )

@@ -4,13 +4,15 @@ webdataset's ``shuffle`` seeds itself from the process id and the clock, so ``se
 cannot make a run reproducible. Seeding from the DataLoader worker's torch seed (the earlier
 approach) repeats a run from scratch but not a resumed one: Lightning does not checkpoint the
 global RNG, so after ``--ckpt_path`` the workers draw other seeds. Here every shuffle draws from
-``random.Random(f"{seed}:{epoch}:{rank}:{worker}:{salt}:{pass}")``, where the epoch is counted
-by ``EpochSeededStream`` from the trainer's epoch at the time the loader was built: a resumed run
-sees the same order from its first new epoch as a straight one.
+``random.Random(f"{seed}:{epoch}:{rank}:{worker}:{salt}:{pass}")``, where ``EpochSeededStream``
+takes the epoch from the trainer: a resumed run sees the same order from its first new epoch as
+a straight one.
 
-The epoch counter lives in the dataset object, so the DataLoader must keep its workers alive
-across epochs (``persistent_workers=True``); with fresh workers each epoch would restart the
-count (``seeded_loader`` builds the loader that way).
+Where the trainer's epoch is read: Lightning restores the loop state *after* it builds the
+dataloaders, but before it iterates them. So the stream reads it at iteration time in the main
+process (``num_workers=0``), and when it is pickled into worker processes, which happens when
+the first epoch they serve starts; workers then count epochs themselves, so they must stay alive
+across epochs (``persistent_workers=True``, as ``seeded_loader`` builds the loader).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import random
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 
 from torch.utils.data import DataLoader, IterableDataset
 from webdataset.utils import pytorch_worker_info
@@ -61,20 +63,41 @@ class SeededShuffle:
 
 
 class EpochSeededStream(IterableDataset):
-    """A pipeline whose every iteration is one epoch: re-seeds its shuffles, then streams."""
+    """A pipeline whose every iteration is one epoch: re-seeds its shuffles, then streams.
+
+    ``current_epoch`` (the trainer's, in the main process) names the epoch an iteration is;
+    without it, or in a worker process, epochs are counted from ``first_epoch``.
+    """
 
     def __init__(
-        self, pipeline: Iterable, shuffles: list[SeededShuffle], seed: int, first_epoch: int = 0
+        self,
+        pipeline: Iterable,
+        shuffles: list[SeededShuffle],
+        seed: int,
+        first_epoch: int = 0,
+        current_epoch: Callable[[], int | None] | None = None,
     ) -> None:
         self.pipeline = pipeline
         self.shuffles = shuffles
         self.seed = seed
-        self.epoch = first_epoch
+        self.next_epoch = first_epoch
+        self.current_epoch = current_epoch
+
+    def _follow_trainer(self) -> None:
+        epoch = self.current_epoch() if self.current_epoch is not None else None
+        if epoch is not None:
+            self.next_epoch = epoch
+
+    def __getstate__(self) -> dict:
+        # pickled into DataLoader workers as the first epoch they serve starts
+        self._follow_trainer()
+        return {**self.__dict__, "current_epoch": None}
 
     def __iter__(self) -> Iterator:
+        self._follow_trainer()
         for shuffle in self.shuffles:
-            shuffle.start_epoch(self.seed, self.epoch)
-        self.epoch += 1
+            shuffle.start_epoch(self.seed, self.next_epoch)
+        self.next_epoch += 1
         return iter(self.pipeline)
 
 

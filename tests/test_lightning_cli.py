@@ -191,22 +191,22 @@ def test_fit_with_the_data_order_alone_changed_ends_elsewhere(
 
 
 def test_fit_resumed_from_last_ckpt_ends_like_a_straight_fit(crafterplay: Path, tmp_path: Path) -> None:
-    """2 steps, then --ckpt_path=last.ckpt on to 3, against a straight 3-step fit: the same
+    """2 steps, then --ckpt_path=last.ckpt on to 4, against a straight 4-step fit: the same
     parameters, optimizer state and LR schedule, bit for bit (CPU, no dropout)."""
     # An epoch is train_batches_per_epoch=2 batches; last.ckpt is written by the validation at
-    # the end of epoch 0 (step 2), and the resumed fit starts epoch 1 with a new iterator whose
-    # shuffles are seeded by (seed, epoch 1), so its step 3 is the straight fit's step 3 batch.
-    # The cosine length is fixed at the full run's 3 steps: the interrupted fit is the same run.
-    same = ("--model.init_args.cosine_steps=3",)
-    _fit(crafterplay, tmp_path / "straight", 3, *same)
+    # the end of epoch 0 (step 2). The resumed fit's shuffles must be seeded with the restored
+    # epoch 1, as the straight fit's second epoch is, or steps 3-4 train on other batches.
+    # The cosine length is fixed at the full run's 4 steps: the interrupted fit is the same run.
+    same = ("--model.init_args.cosine_steps=4",)
+    _fit(crafterplay, tmp_path / "straight", 4, *same)
     _fit(crafterplay, tmp_path / "interrupted", 2, *same)
     (interrupted,) = (tmp_path / "interrupted").iterdir()
     first_part = interrupted / "checkpoints" / "last.ckpt"
     assert torch.load(first_part, weights_only=True)["global_step"] == 2
-    _fit(crafterplay, tmp_path / "resumed", 3, *same, f"--ckpt_path={first_part}")
+    _fit(crafterplay, tmp_path / "resumed", 4, *same, f"--ckpt_path={first_part}")
 
     a, b = (_last_checkpoint(tmp_path / run) for run in ("straight", "resumed"))
-    assert a["global_step"] == b["global_step"] == 3
+    assert a["global_step"] == b["global_step"] == 4
     torch.testing.assert_close(b["state_dict"], a["state_dict"], rtol=0, atol=0)
     (opt_a,), (opt_b,) = a["optimizer_states"], b["optimizer_states"]
     torch.testing.assert_close(opt_b["state"], opt_a["state"], rtol=0, atol=0)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pickle
 import re
 import shutil
 import tarfile
@@ -182,3 +183,17 @@ def test_corrupt_shard_met_in_training_is_named_or_skipped(
     with pytest.warns(UserWarning, match=warning):
         read = {e for e, _ in _order(_module(root, skip_corrupt=True, **kwargs).train_dataloader(), 1)[0]}
     assert read == set(range(NUM_EPISODES)) - {3}  # episode 2, read before the cut, is kept
+
+
+def test_stream_takes_the_trainers_epoch_and_carries_it_into_workers(crafterplay: Path) -> None:
+    # Lightning restores a resumed fit's epoch after building the loaders: the stream reads it
+    # when iterated (main process) or when pickled into worker processes.
+    kwargs = dict(seq_len=8, batch_size=2, val_fraction=0.0, test_fraction=0.0, seed=3)
+    epochs = _order(seeded_loader(_module(crafterplay, **kwargs).dataset("train"), 0, False), 4)
+    restored = {"epoch": 2}
+    stream = _module(crafterplay, **kwargs).dataset("train")
+    stream.current_epoch = lambda: restored["epoch"]
+    assert _order(seeded_loader(stream, 0, False), 1) == [epochs[2]]
+    in_worker = pickle.loads(pickle.dumps(stream))  # what a spawned worker receives
+    assert in_worker.current_epoch is None
+    assert _order(seeded_loader(in_worker, 0, False), 2) == epochs[2:4]
