@@ -29,6 +29,7 @@ from zoo.captions.clips import collate_clips
 from zoo.captions.dataset import decode_caption_sample, list_caption_shards
 from zoo.captions.vocabulary import load_vocabulary
 
+
 def check_manifest_captions(root: str | Path) -> None:
     """Caption ids in the shards must mean the captions this checkout's vocabulary lists."""
     path = Path(root) / "manifest.json"

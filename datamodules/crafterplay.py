@@ -27,8 +27,14 @@ from torch.utils.data import DataLoader
 
 from datamodules.seeded_shuffle import EpochSeededStream, SeededShuffle, run_seed, seeded_loader
 from zoo.data.sequences import (
-    SPLITS, collate_sequences, episode_split, filter_noop_chunks, pack_sequences, read_shards,
-    select_split, ShardSources,
+    SPLITS,
+    ShardSources,
+    collate_sequences,
+    episode_split,
+    filter_noop_chunks,
+    pack_sequences,
+    read_shards,
+    select_split,
 )
 
 
@@ -122,7 +128,8 @@ class CrafterPlayDataModule(L.LightningDataModule):
         )
         pipeline = wds.DataPipeline(*stages)
         if train and hp.train_batches_per_epoch is not None:
-            pipeline = pipeline.with_epoch(max(1, hp.train_batches_per_epoch // max(1, hp.num_workers)))
+            per_worker = max(1, hp.train_batches_per_epoch // max(1, hp.num_workers))
+            pipeline = pipeline.with_epoch(per_worker)
         return EpochSeededStream(pipeline, shuffles, run_seed(hp.seed), first_epoch)
 
     def _trainer_epoch(self) -> int | None:

@@ -190,7 +190,9 @@ def test_fit_with_the_data_order_alone_changed_ends_elsewhere(
     assert any(not torch.equal(a[k], b[k]) for k in a)
 
 
-def test_fit_resumed_from_last_ckpt_ends_like_a_straight_fit(crafterplay: Path, tmp_path: Path) -> None:
+def test_fit_resumed_from_last_ckpt_ends_like_a_straight_fit(
+    crafterplay: Path, tmp_path: Path
+) -> None:
     """2 steps, then --ckpt_path=last.ckpt on to 4, against a straight 4-step fit: the same
     parameters, optimizer state and LR schedule, bit for bit (CPU, no dropout)."""
     # An epoch is train_batches_per_epoch=2 batches; last.ckpt is written by the validation at

@@ -119,7 +119,11 @@ def test_bad_fractions_and_missing_data_are_clear_errors(tmp_path: Path) -> None
 def _order(loader, epochs: int) -> list[list[tuple]]:
     """(episode, step) of each sequence's first step, per epoch, in batch order."""
     return [
-        [(int(e[0]), int(s[0])) for batch in loader for e, s in zip(batch["episode"], batch["step"])]
+        [
+            (int(e[0]), int(s[0]))
+            for batch in loader
+            for e, s in zip(batch["episode"], batch["step"], strict=True)
+        ]
         for _ in range(epochs)
     ]
 
@@ -133,7 +137,8 @@ def test_training_order_follows_the_seed_and_the_epoch(crafterplay: Path) -> Non
     assert _order(_module(crafterplay, seed=4, **kwargs).train_dataloader(), 1)[0] != straight[0]
     # a run resumed at epoch 1 sees what the straight run saw from epoch 1 on
     resumed = _module(crafterplay, seed=3, **kwargs)
-    assert _order(seeded_loader(resumed.dataset("train", first_epoch=1), 0, False), 2) == straight[1:]
+    resumed_loader = seeded_loader(resumed.dataset("train", first_epoch=1), 0, False)
+    assert _order(resumed_loader, 2) == straight[1:]
 
 
 def test_seed_everything_sets_the_order_when_no_seed_is_given(crafterplay: Path) -> None:
@@ -181,7 +186,8 @@ def test_corrupt_shard_met_in_training_is_named_or_skipped(
 
     warning = rf"skipped corrupt shard {re.escape(shard)} \(1 skipped so far"
     with pytest.warns(UserWarning, match=warning):
-        read = {e for e, _ in _order(_module(root, skip_corrupt=True, **kwargs).train_dataloader(), 1)[0]}
+        loader = _module(root, skip_corrupt=True, **kwargs).train_dataloader()
+        read = {e for e, _ in _order(loader, 1)[0]}
     assert read == set(range(NUM_EPISODES)) - {3}  # episode 2, read before the cut, is kept
 
 
