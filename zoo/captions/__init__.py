@@ -2,7 +2,7 @@
 
 `zoo.captions.rules` holds the machinery (windows, registry), the rules live in
 rules_achievement/movement/construction/combat, `vocabulary` loads the caption and
-paraphrase data files, `balance` evens the rules out, `dataset` writes the shards.
+paraphrase data files, `balance` evens out rule categories (or rules), `dataset` writes the shards.
 """
 
 from zoo.captions.balance import balance_indices

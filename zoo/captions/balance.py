@@ -1,16 +1,27 @@
-"""Rule balancing: the paper balances CrafterCaption uniformly over rules (60.8M -> 2.3M pairs).
+"""Balancing CrafterCaption: the paper evens out rule *categories* (60.8M -> 2.3M pairs).
 
-Every rule keeps the same number of samples: the count of the rarest rule that fired (or a
-chosen ``per_rule`` target; rules with fewer keep all theirs). Inside a rule the quota is
-spread as evenly as possible over its captions, so "craft iron sword" is not drowned by
-"craft wood pickaxe", and the samples kept per caption are a seeded random subset.
+Appendix C, Training Details: "As we observed the imbalance between rule categories in the
+original CrafterCaption dataset, we balanced the CrafterCaption dataset uniformly." So the
+default unit is the category: each of the 4 categories keeps the same number of clips (the
+rarest category's count, or a chosen ``per_unit``; a category with fewer keeps all its clips).
+``unit="rule"`` evens out the 15 rules instead.
+
+Below the unit the quota is spread as evenly as possible level by level (category -> rules ->
+captions; rule -> captions). Without that, balancing categories would just rescale the raw mix
+inside one: Achievement would be mostly "obtain wood" and nearly never "go to sleep" or
+"craft iron sword", and the balancing would not help the rare behaviours it is there for.
+The clips a caption keeps are a seeded random subset.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 BALANCE_MODES = ("uniform", "none")
+BALANCE_UNITS = ("category", "rule")
+DEFAULT_BALANCE_UNIT = "category"
 
 
 def even_split(counts: list[int], quota: int) -> list[int]:
@@ -28,45 +39,75 @@ def even_split(counts: list[int], quota: int) -> list[int]:
     return take
 
 
+def unit_levels(
+    unit: str, categories: np.ndarray, rules: np.ndarray, captions: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """The label levels ``balance_indices`` takes for ``unit``: the unit, then those below it."""
+    if unit not in BALANCE_UNITS:
+        raise ValueError(f"balance unit {unit!r} not in {BALANCE_UNITS}")
+    return (categories, rules, captions)[BALANCE_UNITS.index(unit) :]
+
+
+def _spread(
+    levels: Sequence[np.ndarray], idx: np.ndarray, take: int
+) -> list[tuple[np.ndarray, int]]:
+    """(pool, count) per finest group: ``take`` of the samples ``idx`` split evenly over the
+    groups of ``levels[0]``, each share split the same way over the next level, and so on."""
+    if not levels:
+        return [(idx, take)]
+    labels = levels[0][idx]
+    groups, counts = np.unique(labels, return_counts=True)
+    return [
+        leaf
+        for group, n in zip(groups, even_split(counts.tolist(), take))
+        for leaf in _spread(levels[1:], idx[labels == group], n)
+    ]
+
+
 def balance_indices(
-    rules: np.ndarray,
-    captions: np.ndarray,
+    levels: Sequence[np.ndarray],
     seed: int | np.random.SeedSequence,
     mode: str = "uniform",
-    per_rule: int | None = None,
+    per_unit: int | None = None,
 ) -> np.ndarray:
     """Indices (sorted) of the samples kept.
 
     Args:
-        rules: (n,) rule id per sample.
-        captions: (n,) caption id per sample.
+        levels: per-sample label arrays, coarsest first (see ``unit_levels``). ``levels[0]`` is
+            the unit every value of which keeps the same count; the quota of a unit is spread
+            evenly over the groups of ``levels[1]`` in it, and so on down.
         seed: seeds the choice of samples kept; same inputs and seed -> same indices.
-        mode: "uniform" (same count per rule) or "none" (keep everything).
-        per_rule: target per rule for "uniform"; default: the rarest rule's count.
+        mode: "uniform" (same count per unit) or "none" (keep everything).
+        per_unit: target per unit for "uniform"; default: the rarest unit's count.
     """
-    rules, captions = np.asarray(rules), np.asarray(captions)
+    levels = [np.asarray(level) for level in levels]
     if mode not in BALANCE_MODES:
         raise ValueError(f"balance mode {mode!r} not in {BALANCE_MODES}")
-    if len(rules) != len(captions):
-        raise ValueError(f"rules ({len(rules)}) and captions ({len(captions)}) differ in length")
-    if mode == "none" or len(rules) == 0:
-        return np.arange(len(rules))
-    rule_ids, rule_counts = np.unique(rules, return_counts=True)
-    quota = int(rule_counts.min()) if per_rule is None else int(per_rule)
+    if not levels or len({len(level) for level in levels}) != 1:
+        raise ValueError(f"need label levels of one length, got {[len(x) for x in levels]}")
+    n = len(levels[0])
+    if mode == "none" or n == 0:
+        return np.arange(n)
+    units, unit_counts = np.unique(levels[0], return_counts=True)
+    quota = int(unit_counts.min()) if per_unit is None else int(per_unit)
     if quota < 1:
-        raise ValueError(f"per_rule must be >= 1, got {per_rule}")
+        raise ValueError(f"per_unit must be >= 1, got {per_unit}")
     rng = np.random.default_rng(seed)
     kept = []
-    for rule in rule_ids:
-        in_rule = np.flatnonzero(rules == rule)
-        caption_ids, caption_counts = np.unique(captions[in_rule], return_counts=True)
-        for caption, n in zip(caption_ids, even_split(caption_counts.tolist(), quota)):
-            pool = in_rule[captions[in_rule] == caption]
-            kept.append(rng.choice(pool, size=n, replace=False) if n < len(pool) else pool)
+    for unit, count in zip(units, unit_counts):
+        in_unit = np.flatnonzero(levels[0] == unit)
+        for pool, take in _spread(levels[1:], in_unit, min(quota, int(count))):
+            kept.append(rng.choice(pool, size=take, replace=False) if take < len(pool) else pool)
     return np.sort(np.concatenate(kept))
 
 
-def count_by(names: list[str], ids: np.ndarray) -> dict[str, int]:
+def count_by(names: Sequence[str], ids: np.ndarray) -> dict[str, int]:
     """Samples per name (ids index ``names``); names with no sample are listed with 0."""
     counts = np.bincount(np.asarray(ids, np.int64), minlength=len(names))
     return {name: int(c) for name, c in zip(names, counts)}
+
+
+def shares(counts: dict[str, int]) -> dict[str, float]:
+    """Each name's fraction of all the samples counted (4 decimals; all 0 when none)."""
+    total = sum(counts.values())
+    return {name: round(n / total, 4) if total else 0.0 for name, n in counts.items()}

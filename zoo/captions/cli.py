@@ -14,6 +14,7 @@ import urllib.request
 
 import yaml
 
+from zoo.captions.balance import BALANCE_MODES, BALANCE_UNITS, DEFAULT_BALANCE_UNIT
 from zoo.captions.vocabulary import load_vocabulary
 
 PROMPT = """<goal>
@@ -113,16 +114,26 @@ def _paraphrase(args: argparse.Namespace) -> int:
     return 0
 
 
+def format_shares(shares: dict[str, float]) -> str:
+    """``name 12.3%, ...`` for the names that kept clips (a summary line, not the manifest)."""
+    return ", ".join(f"{name} {share:.1%}" for name, share in shares.items() if share)
+
+
 def _caption(args: argparse.Namespace) -> int:
     from zoo.captions.dataset import caption_dataset
 
     manifest = caption_dataset(
-        args.src, args.out, seed=args.seed, balance=args.balance, per_rule=args.per_rule,
+        args.src, args.out, seed=args.seed, balance=args.balance,
+        balance_unit=args.balance_unit, per_unit=args.per_unit,
         heldout_episodes=args.heldout_episodes, val_episodes=args.val_episodes,
         per_shard=args.per_shard, progress=True,
     )
     sizes = {s: m["samples"] for s, m in manifest["splits"].items()}
-    print(f"wrote {sizes} clip-caption pairs to {args.out}")
+    how = f"balanced per {args.balance_unit}" if args.balance == "uniform" else "unbalanced"
+    print(f"wrote {sizes} clip-caption pairs to {args.out} ({how})")
+    for split, meta in manifest["splits"].items():
+        print(f"{split} shares by category: {format_shares(meta['shares']['categories'])}")
+        print(f"{split} shares by rule: {format_shares(meta['shares']['rules'])}")
     return 0
 
 
@@ -169,15 +180,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def register_data_commands(data_subparsers: argparse._SubParsersAction) -> None:
     """Add `zoo data caption` to the data group (called by zoo/data/cli.py)."""
     cap = data_subparsers.add_parser(
-        "caption", help="CrafterPlay shards -> rule-balanced CrafterCaption shards"
+        "caption", help="CrafterPlay shards -> category-balanced CrafterCaption shards"
     )
     cap.add_argument("--src", required=True, help="CrafterPlay folder (with manifest.json)")
     cap.add_argument("--out", required=True, help="output folder for the caption shards")
     cap.add_argument("--seed", type=int, default=0, help="seeds the held-out split and balancing")
-    cap.add_argument("--balance", choices=("uniform", "none"), default="uniform",
-                     help="uniform: same number of clips per rule (paper); none: keep all")
-    cap.add_argument("--per-rule", type=int, default=None,
-                     help="clips per rule when balancing (default: the rarest rule's count)")
+    cap.add_argument("--balance", choices=BALANCE_MODES, default="uniform",
+                     help="uniform: same number of clips per --balance-unit (paper); "
+                     "none: keep all")
+    cap.add_argument("--balance-unit", choices=BALANCE_UNITS, default=None,
+                     help=f"what uniform balancing evens out (default {DEFAULT_BALANCE_UNIT}, the "
+                     "paper's 'rule categories'); inside a unit clips are spread evenly over its "
+                     "rules, then captions")
+    quota = cap.add_mutually_exclusive_group()
+    quota.add_argument("--per-unit", type=int, default=None, metavar="K",
+                       help="clips per unit when balancing (default: the rarest unit's count)")
+    quota.add_argument("--per-rule", type=int, default=None, metavar="K",
+                       help="K clips per rule: short for --balance-unit rule --per-unit K")
     cap.add_argument("--heldout-episodes", type=int, default=1000,
                      help="episodes held out for the test split (paper: 1000); with fewer "
                      "episodes in the input, 5%% of them (at least one)")
@@ -185,4 +204,14 @@ def register_data_commands(data_subparsers: argparse._SubParsersAction) -> None:
                      help="other episodes for a validation split that picks checkpoints, so the "
                      "test split is only scored (default 0: no val split)")
     cap.add_argument("--per-shard", type=int, default=1000, help="clips per shard")
-    cap.set_defaults(handler=_caption)
+
+    def resolve_unit(args: argparse.Namespace) -> int:
+        """--per-rule keeps its old meaning (a quota per rule), so it implies the rule unit."""
+        if args.per_rule is not None:
+            if args.balance_unit == "category":
+                cap.error("--per-rule balances rules; use --per-unit with --balance-unit category")
+            args.balance_unit, args.per_unit = "rule", args.per_rule
+        args.balance_unit = args.balance_unit or DEFAULT_BALANCE_UNIT
+        return _caption(args)
+
+    cap.set_defaults(handler=resolve_unit)

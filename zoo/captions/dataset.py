@@ -2,15 +2,17 @@
 
 Two passes over the episodes: the first runs the rules on the states and keeps only
 (episode, step, caption) references; then the held-out split is drawn by episode, each split
-is balanced over rules, and the second pass cuts the kept 6-frame clips o_{t-4..t+1} and
-writes them. Everything after the input is fixed by the seed, so a rerun writes identical
-shards; each shard is written to a temp name and renamed, so a killed run resumes by
-skipping the shards already there (plan.json guards against resuming a different run).
+is balanced over rule categories (the paper) or rules, and the second pass cuts the kept
+6-frame clips o_{t-4..t+1} and writes them. Everything after the input is fixed by the seed,
+so a rerun writes identical shards; each shard is written to a temp name and renamed, so a
+killed run resumes by skipping the shards already there (plan.json guards against resuming a
+different run).
 
 Shard layout: ``{out}/{split}-{i:06d}.tar`` with split in train/test; per sample
 ``{key}.frames.npy.zst`` (zstd-compressed .npy, uint8 (6, 144, 144, 3)) and ``{key}.json``
 (caption, caption_id, rule, category, episode, seed, step, env, expert); ``manifest.json``
-lists shards and per-rule/per-caption counts before and after balancing.
+lists shards, the balance unit, per-category/rule/caption counts before and after balancing,
+and the kept clips' shares per category and per rule.
 """
 
 from __future__ import annotations
@@ -28,8 +30,16 @@ import numpy as np
 import zstandard
 from tqdm import tqdm
 
-from zoo.captions.balance import balance_indices, count_by
-from zoo.captions.rules import EpisodeView, RuleParams, all_rules, scan_episode
+from zoo.captions.balance import (
+    BALANCE_MODES,
+    BALANCE_UNITS,
+    DEFAULT_BALANCE_UNIT,
+    balance_indices,
+    count_by,
+    shares,
+    unit_levels,
+)
+from zoo.captions.rules import CATEGORIES, EpisodeView, RuleParams, all_rules, scan_episode
 from zoo.captions.vocabulary import Caption, Vocabulary, load_vocabulary
 
 SPLITS = ("train", "val", "test")  # "val" only when val_episodes > 0
@@ -194,7 +204,8 @@ def write_caption_dataset(
     *,
     seed: int = 0,
     balance: str = "uniform",
-    per_rule: int | None = None,
+    balance_unit: str = DEFAULT_BALANCE_UNIT,
+    per_unit: int | None = None,
     heldout_episodes: int = 1000,
     heldout_fraction: float = 0.05,
     val_episodes: int = 0,
@@ -206,12 +217,18 @@ def write_caption_dataset(
 ) -> dict:
     """Caption the episodes ``episodes()`` yields (called twice, same order) into ``out``.
 
-    ``heldout_episodes`` episodes form the test split; ``val_episodes`` others, if > 0, a
-    validation split for checkpoint selection (so the test split is never used for choosing).
+    ``balance_unit`` ("category" or "rule") is what ``balance`` evens out, ``per_unit`` its
+    clips per unit (see zoo.captions.balance). ``heldout_episodes`` episodes form the test
+    split; ``val_episodes`` others, if > 0, a validation split for checkpoint selection (so the
+    test split is never used for choosing).
     Returns the manifest (also written to out/manifest.json).
     """
     if per_shard < 1:
         raise ValueError(f"--per-shard must be >= 1, got {per_shard}")
+    if balance not in BALANCE_MODES or balance_unit not in BALANCE_UNITS:  # fail before the scan
+        raise ValueError(
+            f"balance {balance!r} / unit {balance_unit!r} not in {BALANCE_MODES} / {BALANCE_UNITS}"
+        )
     params = params or RuleParams()
     vocab = load_vocabulary()
     out = Path(out)
@@ -239,36 +256,42 @@ def write_caption_dataset(
     split_seeds = dict(zip(("train", "test", "val"), balance_seeds))
 
     caption_names, rule_names = vocab.texts(), vocab.rules()
+    caption_category = np.array([CATEGORIES.index(c.category) for c in vocab.captions], np.int64)
+
+    def tally(rows: CaptionRefs) -> dict[str, dict[str, int]]:
+        return {
+            "categories": count_by(CATEGORIES, caption_category[rows.caption]),
+            "rules": count_by(rule_names, rows.rule),
+            "captions": count_by(caption_names, rows.caption),
+        }
+
     kept: dict[str, CaptionRefs] = {}
     split_meta: dict[str, dict] = {}
     for split in splits:
         part = refs.take(np.flatnonzero(np.isin(refs.episode, split_ids[split])))
-        bseed = split_seeds[split]
-        chosen = part.take(balance_indices(part.rule, part.caption, bseed, balance, per_rule))
+        levels = unit_levels(balance_unit, caption_category[part.caption], part.rule, part.caption)
+        chosen = part.take(balance_indices(levels, split_seeds[split], balance, per_unit))
         if len(chosen) == 0:
             raise ValueError(
                 f"the {split} split is empty: its {len(split_ids[split])} episodes fired no "
                 "caption rule; generate longer or more episodes"
             )
         kept[split] = chosen
+        after = tally(chosen)
         split_meta[split] = {
-            "episodes": int(len(split_ids[split])),
+            "episodes": len(split_ids[split]),
             "samples": len(chosen),
-            "counts_before": {
-                "rules": count_by(rule_names, part.rule),
-                "captions": count_by(caption_names, part.caption),
-            },
-            "counts_after": {
-                "rules": count_by(rule_names, chosen.rule),
-                "captions": count_by(caption_names, chosen.caption),
-            },
+            "counts_before": tally(part),
+            "counts_after": after,
+            "shares": {level: shares(after[level]) for level in ("categories", "rules")},
         }
 
     plan = {
         "format_version": FORMAT_VERSION,
         "seed": seed,
         "balance": balance,
-        "per_rule": per_rule,
+        "balance_unit": balance_unit,
+        "per_unit": per_unit,
         "per_shard": per_shard,
         "rule_params": asdict(params),
         "episodes": ids.tolist(),

@@ -6,6 +6,8 @@ a blocked or no-effect action (mining stone without a pickaxe) is not captioned.
 
 from __future__ import annotations
 
+import numpy as np
+
 from zoo.captions.rules import PLACEABLE_ITEMS, Window, register_rule
 from zoo.envs.constants import Action, Block, Item
 
@@ -108,18 +110,27 @@ def craft(w: Window) -> list[str]:
 
 @register_rule("kill", "achievement", KILL, [{"mob": m} for m in KILLABLE])
 def kill(w: Window) -> list[str]:
-    """DO hit a mob standing on the facing tile at t, and at t+1 no mob of that kind is on or
-    next to that tile: the mob died (a survivor moves at most one tile per step)."""
+    """DO hit a mob standing on the facing tile at t, and at t+1 no mob of that kind could be
+    it: a survivor is at most one tile from that tile (mobs move one tile per step) and has less
+    health than the victim had (the hit costs at least 1; mobs never heal), so an unhurt
+    same-kind bystander next to the tile does not hide the kill."""
     if w.action != Action.DO or w.asleep():
         return []
     target = w.facing_tile()
     out = []
     for mob in KILLABLE:
-        here = w.episode.mobs(mob, w.t)
-        if not (here == target).all(axis=1).any():
+        key = f"{mob}s"
+        status, positions = w.state(f"{key}_status"), w.state(f"{key}_pos")
+        hit = (status[:, 0] > 0) & (positions == target).all(axis=1)
+        if not hit.any():
             continue
-        later = w.episode.mobs(mob, w.t + 1)
-        if not (abs(later - target).sum(axis=1) <= 1).any():
+        health = status[hit.argmax(), 1]  # one mob per tile
+        status1, positions1 = w.state(f"{key}_status", 1), w.state(f"{key}_pos", 1)
+        survived = any(
+            status1[i, 1] < health and abs(positions1[i] - target).sum() <= 1
+            for i in np.flatnonzero(status1[:, 0] > 0)
+        )
+        if not survived:
             out.append(KILL.format(mob=mob))
     return out
 

@@ -3,6 +3,9 @@
 Zombies hit from an adjacent tile; skeletons hit with arrows that fly straight and hurt the
 player when their next tile is the player's. Both games resolve the player's action first,
 then the mobs, so an attack at step t is judged against the player's tile at t+1.
+
+An attack resets the attacker's cooldown (column 2 of ``*_status``) to a fixed value that it
+otherwise only counts down from, so cooldown == that value at t+1 means "attacked at t".
 """
 
 from __future__ import annotations
@@ -16,29 +19,53 @@ BLOCK_ATTACK = "block attack from {mob} with {item}"
 
 ATTACKERS = ("zombie", "skeleton")
 HEALTH = 0
+COOLDOWN = 2  # column of *_status
+ZOMBIE_ATTACK_COOLDOWN = 5  # set by a zombie's hit (Craftax-Classic and crafter alike)
+SKELETON_RELOAD = 4  # set by a skeleton's shot (Craftax-Classic and crafter alike)
 
 
 def _manhattan(a: np.ndarray, b: np.ndarray) -> int:
     return int(np.abs(np.asarray(a, np.int64) - np.asarray(b, np.int64)).sum())
 
 
+def _attacked_adjacent(w: Window, mob: str, reset: int) -> bool:
+    """A live {mob} next to the player at t+1 has the cooldown an attack at t leaves.
+
+    Neither game moves a mob on the step it attacks, and the player has already moved, so the
+    attacker stands next to the player's tile at t+1.
+    """
+    key = f"{mob}s"
+    status, positions = w.state(f"{key}_status", 1), w.state(f"{key}_pos", 1)
+    player = w.pos(1)
+    return any(
+        status[i, COOLDOWN] == reset and _manhattan(positions[i], player) == 1
+        for i in np.flatnonzero(status[:, 0] > 0)
+    )
+
+
 @register_rule("attacked_by", "combat", ATTACKED_BY, [{"mob": m} for m in ATTACKERS])
 def attacked_by(w: Window) -> list[str]:
-    """Health dropped between t and t+1 and an attacker explains it: zombie: one was adjacent
-    to the player at t or t+1; skeleton: an arrow at t was headed into the player's tile at t
-    or t+1 (position + heading lands on it)."""
+    """Health dropped between t and t+1 and an attack explains it.
+
+    zombie: an adjacent zombie attacked at t (its cooldown reset), so health lost to hunger or
+    thirst next to a zombie still cooling down is not an attack. skeleton: an arrow at t was
+    headed into the player's tile at t or t+1 (position + heading lands on it), or an adjacent
+    skeleton shot at t (its reload reset): Craftax-Classic spawns that arrow on the skeleton's
+    tile and moves it into the player within the same step, so it is never seen in flight.
+    """
     if w.state("player_vitals", 1)[HEALTH] >= w.state("player_vitals")[HEALTH]:
         return []
     out = []
-    if w.nearest("zombie") <= 1 or w.nearest("zombie", 1) <= 1:
+    if _attacked_adjacent(w, "zombie", ZOMBIE_ATTACK_COOLDOWN):
         out.append(ATTACKED_BY.format(mob="zombie"))
     status, arrows, heading = w.state("arrows_status"), w.state("arrows_pos"), w.state("arrows_dir")
     targets = (w.pos(), w.pos(1))
-    for i in np.flatnonzero(status[:, 0] > 0):
-        lands = arrows[i].astype(np.int64) + heading[i].astype(np.int64)
-        if any(np.array_equal(lands, p) for p in targets):
-            out.append(ATTACKED_BY.format(mob="skeleton"))
-            break
+    in_flight = any(
+        any(np.array_equal(arrows[i].astype(np.int64) + heading[i], p) for p in targets)
+        for i in np.flatnonzero(status[:, 0] > 0)
+    )
+    if in_flight or _attacked_adjacent(w, "skeleton", SKELETON_RELOAD):
+        out.append(ATTACKED_BY.format(mob="skeleton"))
     return out
 
 

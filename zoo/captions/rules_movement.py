@@ -80,25 +80,66 @@ def approach(w: Window) -> list[str]:
     return out
 
 
+def _track(w: Window, mob: str) -> np.ndarray | None:
+    """(history + 2, 2) positions over t-history..t+1 of the {mob} nearest the player at the
+    clip's start, followed as the live one of its kind nearest its last tile (mobs move at most
+    one tile a step; crafter's export orders slots by distance, so slots are no identity).
+    None when there is none at the start or it is lost (killed or despawned, not outrun)."""
+    seen = w.episode.mobs(mob, w.start)
+    if not len(seen):
+        return None
+    path = [seen[np.abs(seen - w.pos(-w.params.history)).sum(axis=1).argmin()]]
+    for step in range(w.start + 1, w.t + 2):
+        seen = w.episode.mobs(mob, step)
+        gap = np.abs(seen - path[-1]).sum(axis=1)
+        if not len(seen) or gap.min() > 1:
+            return None
+        path.append(seen[gap.argmin()])
+    return np.array(path)
+
+
+def _fled(w: Window, mob: str) -> bool:
+    """The player ran from a pursuing hostile {mob}; see `flee`."""
+    mob_path = _track(w, mob)
+    if mob_path is None:
+        return False
+    player = w.episode.pos[w.start : w.t + 2]
+    dist = np.abs(player - mob_path).sum(axis=1)
+    before_mob_step = np.abs(player[1:] - mob_path[:-1]).sum(axis=1)
+    stepped_away = (before_mob_step > dist[:-1]).all()
+    pursued = (dist[1:] < before_mob_step).any() or (
+        mob == "skeleton"
+        and any(next(w.incoming_arrows(dt), None) is not None for dt in range(-w.params.history, 1))
+    )
+    return bool(
+        dist[0] <= w.params.flee_radius
+        and stepped_away
+        and pursued
+        and (np.diff(dist) >= 0).all()
+        and dist[-1] > dist[-2]
+        and dist[-1] - dist[0] >= w.params.flee_min_gain
+    )
+
+
 @register_rule("flee", "movement", FLEE, [{"mob": m} for m in FLEEABLE])
 def flee(w: Window) -> list[str]:
     """The player moved away from danger at t.
 
-    zombie/skeleton (hostile): the nearest one was within `flee_radius` at the clip's start,
-    the player's move at t increased the distance and over the clip it grew by at least
-    `flee_min_gain`. arrow: an arrow flying straight at the player at t (within
-    `arrow_radius`) no longer has the player in its line at t+1 (a side step), and the player
-    took no damage.
+    zombie/skeleton (hostile), following the one nearest the player at the clip's start:
+    - threat: it was within `flee_radius` at the clip's start;
+    - running away: on every step of the clip (t-4..t) the player changed tile, each step taking
+      it farther from where the mob stood (walking towards or past a mob is not fleeing);
+    - pursuit: the mob came after the player: at least once its own step brought it closer
+      (a chase), or, for a skeleton, which keeps its distance and shoots, an arrow flew at the
+      player during the clip (walking away from a mob that stands still is not fleeing);
+    - escape: the distance never shrank over the clip, grew at t, and grew by at least
+      `flee_min_gain` from the clip's start to t+1; a mob killed or despawned is not outrun.
+    arrow: an arrow flying straight at the player at t (within `arrow_radius`) no longer has
+    the player in its line at t+1 (a side step), and the player took no damage.
     """
     if not w.episode.moved[w.t]:
         return []
-    out = []
-    for mob in HOSTILE_MOBS:
-        start, now, end = w.nearest(mob, -w.params.history), w.nearest(mob), w.nearest(mob, 1)
-        gone = end >= NO_MOB  # killed or despawned, not outrun
-        near = start <= w.params.flee_radius
-        if near and not gone and end > now and end - start >= w.params.flee_min_gain:
-            out.append(FLEE.format(mob=mob))
+    out = [FLEE.format(mob=mob) for mob in HOSTILE_MOBS if _fled(w, mob)]
     vitals0, vitals1 = w.state("player_vitals"), w.state("player_vitals", 1)
     if vitals1[0] >= vitals0[0]:
         after = w.pos(1)

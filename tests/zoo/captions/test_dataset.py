@@ -67,16 +67,75 @@ def test_manifest_counts_and_split(captioned):
     assert test["samples"] > 0 and train["samples"] > 0
     assert (train["episodes"], test["episodes"]) == (2, 1)  # 1000 requested > 3: 5%, at least one
     assert len(manifest["heldout"]) == 1 and manifest["heldout"][0] in manifest["episodes"]
+    assert (manifest["balance"], manifest["balance_unit"], manifest["per_unit"]) == (
+        "uniform", "category", None  # the paper balances rule categories
+    )
+    vocab = load_vocabulary()
     for split in (train, test):
-        after = [n for n in split["counts_after"]["rules"].values() if n]
-        assert max(after) - min(after) <= 1  # uniform over the rules that fired
-        assert sum(split["counts_after"]["captions"].values()) == split["samples"]
+        before, after = split["counts_before"], split["counts_after"]
+        kept = [n for n in after["categories"].values() if n]
+        assert len(set(kept)) == 1  # every category that fired keeps the rarest one's count
+        fired = {c for c, n in before["categories"].items() if n}
+        assert {c for c, n in after["categories"].items() if n} == fired
+        for category in fired:  # inside a category the rules are spread evenly
+            rules = {c.rule for c in vocab.captions if c.category == category}
+            most = max(after["rules"][r] for r in rules)
+            for r in rules:
+                assert after["rules"][r] in (before["rules"][r], most, most - 1)
+        for level in ("categories", "rules", "captions"):
+            assert sum(after[level].values()) == split["samples"]
         assert sum(s["samples"] for s in split["shards"]) == split["samples"]
-        fired = {r for r, n in split["counts_before"]["rules"].items() if n}
-        assert {r for r, n in split["counts_after"]["rules"].items() if n} == fired
+        for level in ("categories", "rules"):
+            expected = {k: round(n / split["samples"], 4) for k, n in after[level].items()}
+            assert split["shares"][level] == expected
     held = set(manifest["heldout"])
     assert all(s["episode"] in held for s in read_split(captioned, "test"))
     assert not any(s["episode"] in held for s in read_split(captioned, "train"))
+
+
+def test_rule_unit_evens_out_rules_and_prints_both_shares(play, tmp_path, capsys):
+    argv = ["data", "caption", "--src", str(play), "--out", str(tmp_path), "--seed", "0",
+            "--balance-unit", "rule"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert manifest["balance_unit"] == "rule"
+    for name, split in manifest["splits"].items():
+        kept = [n for n in split["counts_after"]["rules"].values() if n]
+        assert len(set(kept)) == 1  # every rule that fired keeps the rarest one's count
+        fired = {r for r, n in split["counts_before"]["rules"].items() if n}
+        assert {r for r, n in split["counts_after"]["rules"].items() if n} == fired
+        for level, label in (("categories", "category"), ("rules", "rule")):
+            line = next(x for x in out.splitlines() if x.startswith(f"{name} shares by {label}:"))
+            for key, share in split["shares"][level].items():
+                assert (f"{key} {share:.1%}" in line) == (share > 0)
+    assert "(balanced per rule)" in out
+
+
+def test_per_rule_is_a_quota_per_rule(play, tmp_path):
+    argv = ["data", "caption", "--src", str(play), "--out", str(tmp_path), "--seed", "0",
+            "--per-rule", "1"]
+    assert main(argv) == 0
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert (manifest["balance_unit"], manifest["per_unit"]) == ("rule", 1)
+    for split in manifest["splits"].values():
+        assert set(split["counts_after"]["rules"].values()) == {0, 1}
+
+
+def test_per_rule_with_the_category_unit_is_a_usage_error(play, tmp_path, capsys):
+    argv = ["data", "caption", "--src", str(play), "--out", str(tmp_path),
+            "--balance-unit", "category", "--per-rule", "5"]
+    with pytest.raises(SystemExit):
+        main(argv)
+    assert "use --per-unit with --balance-unit category" in capsys.readouterr().err
+
+
+def test_unknown_balance_unit_fails_before_the_rule_pass(tmp_path):
+    def episodes():
+        pytest.fail("the episodes were read before the arguments were checked")
+
+    with pytest.raises(ValueError, match="unit 'caption' not in"):
+        write_caption_dataset(episodes, tmp_path, balance_unit="caption")
 
 
 def _shard_bytes(root: Path) -> dict[str, bytes]:

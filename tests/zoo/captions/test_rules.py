@@ -120,6 +120,20 @@ def test_kill_when_target_vanishes_not_when_it_steps_aside():
     put_mob(s, "zombies", [EAST] * (STEP + 1))
     assert fires(actions, s, "kill") == ["kill zombie"]
     put_mob(s, "zombies", [EAST] * (STEP + 1) + [(31, 33)] * (T - STEP - 1))
+    s["zombies_status"][STEP + 1 :, 0, 1] = 4  # hit for one point, stepped aside
+    assert fires(actions, s, "kill") == []
+
+
+def test_kill_with_a_same_kind_bystander_next_to_the_target():
+    actions, s = blank()
+    actions[STEP] = Action.DO
+    put_mob(s, "zombies", [EAST] * (STEP + 1))
+    s["zombies_status"][STEP, 0, 1] = 1  # one hit from death
+    put_mob(s, "zombies", [(31, 33)] * T, slot=1)  # unhurt, next to the target throughout
+    assert fires(actions, s, "kill") == ["kill zombie"]
+    put_mob(s, "zombies", [EAST] * (STEP + 1) + [(33, 33)] * (T - STEP - 1))
+    s["zombies_status"][STEP, 0, 1] = 2
+    s["zombies_status"][STEP + 1 :, 0, 1] = 1  # the hit cost it a point: it survived
     assert fires(actions, s, "kill") == []
 
 
@@ -178,12 +192,33 @@ def test_approach_ends_near_the_mob():
 def test_flee_from_hostile_mob_only():
     actions, s = blank()
     actions[:-1] = Action.MOVE_RIGHT
-    walk_east(s)
-    put_mob(s, "zombies", [(32, 30)] * T)
+    walk_east(s)  # col 32 at t=0 .. 37 at t=5
+    chase = [(32, c) for c in (30, 31, 32, 32, 33, 33, 34, 34)]  # follows, falling behind
+    put_mob(s, "zombies", chase)
     assert fires(actions, s, "flee") == ["flee from zombie"]
     s["zombies_status"][:] = 0
-    put_mob(s, "cows", [(32, 30)] * T)  # running from a cow is not fleeing
+    put_mob(s, "cows", chase)  # running from a cow is not fleeing
     assert fires(actions, s, "flee") == []
+
+
+def test_flee_not_when_walking_past_a_standing_zombie():
+    actions, s = blank()
+    actions[:-1] = Action.MOVE_RIGHT
+    walk_east(s, start_col=30)  # passes (33, 31) at distance 1, then walks on
+    put_mob(s, "zombies", [(33, 31)] * T)
+    episode = EpisodeView(actions, s)
+    assert [c for _, _, c in scan_episode(episode, {"flee": all_rules()["flee"]})] == []
+
+
+def test_flee_from_skeleton_needs_it_to_shoot():
+    actions, s = blank()
+    actions[:-1] = Action.MOVE_RIGHT
+    walk_east(s)
+    put_mob(s, "skeletons", [(32, 30)] * T)  # skeletons keep their distance instead of chasing
+    assert fires(actions, s, "flee") == []
+    put_mob(s, "arrows", [(32, 31)] * 2)  # at t=1 an arrow flies at the player
+    s["arrows_dir"][:, 0] = (0, 1)
+    assert fires(actions, s, "flee") == ["flee from skeleton"]
 
 
 def test_flee_from_arrow_is_a_side_step_out_of_its_line():
@@ -265,6 +300,7 @@ def test_attacked_by_zombie_needs_damage_and_an_adjacent_zombie():
     actions, s = blank()
     s["player_vitals"][STEP + 1 :, 0] = 7
     put_mob(s, "zombies", [EAST] * T)
+    s["zombies_status"][STEP + 1, 0, 2] = 5  # the hit resets its cooldown
     assert fires(actions, s, "attacked_by") == ["attacked by zombie"]
     s["zombies_status"][:] = 0  # lost health to hunger, nobody near
     assert fires(actions, s, "attacked_by") == []
@@ -277,6 +313,26 @@ def test_attacked_by_skeleton_is_an_arrow_hit():
     s["arrows_dir"][:, 0] = (0, 1)
     assert fires(actions, s, "attacked_by") == ["attacked by skeleton"]
     s["arrows_dir"][:, 0] = (1, 0)  # flies past
+    assert fires(actions, s, "attacked_by") == []
+
+
+def test_attacked_by_zombie_not_while_its_attack_cools_down():
+    actions, s = blank()
+    s["player_vitals"][STEP + 1 :, 0] = 8  # starving: one point lost, a zombie next to us
+    put_mob(s, "zombies", [EAST] * T)
+    s["zombies_status"][:, 0, 2] = np.arange(T)[::-1]  # 7, 6, ...: cooling down, no attack
+    assert fires(actions, s, "attacked_by") == []
+    s["zombies_status"][STEP + 1, 0, 2] = 5  # cooldown reset at t+1: it attacked at t
+    assert fires(actions, s, "attacked_by") == ["attacked by zombie"]
+
+
+def test_attacked_by_skeleton_point_blank():
+    actions, s = blank()
+    s["player_vitals"][STEP + 1 :, 0] = 7
+    put_mob(s, "skeletons", [EAST] * T)  # adjacent: its arrow spawns and hits in one step
+    s["skeletons_status"][STEP + 1, 0, 2] = 4  # reload set at t+1: it shot at t
+    assert fires(actions, s, "attacked_by") == ["attacked by skeleton"]
+    s["skeletons_status"][:, 0, 2] = 0  # it did not shoot: hunger took the health
     assert fires(actions, s, "attacked_by") == []
 
 
