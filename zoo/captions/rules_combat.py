@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from zoo.captions.rules import PLACEABLE_ITEMS, Window, register_rule
+from zoo.envs.constants import SKELETON_RELOAD, ZOMBIE_ATTACK_COOLDOWN
 
 ATTACKED_BY = "attacked by {mob}"
 BLOCK_ATTACK = "block attack from {mob} with {item}"
@@ -20,8 +21,6 @@ BLOCK_ATTACK = "block attack from {mob} with {item}"
 ATTACKERS = ("zombie", "skeleton")
 HEALTH = 0
 COOLDOWN = 2  # column of *_status
-ZOMBIE_ATTACK_COOLDOWN = 5  # set by a zombie's hit (Craftax-Classic and crafter alike)
-SKELETON_RELOAD = 4  # set by a skeleton's shot (Craftax-Classic and crafter alike)
 
 
 def _manhattan(a: np.ndarray, b: np.ndarray) -> int:

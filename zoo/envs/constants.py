@@ -116,6 +116,11 @@ MOB_NAMES: tuple[str, ...] = tuple(m.name.lower() for m in Mob)
 NUM_ACTIONS = len(Action)
 NUM_ACHIEVEMENTS = len(Achievement)
 
+# The cooldown a mob's attack resets (both games; it only counts down otherwise), so a mob
+# whose cooldown equals it at t+1 attacked at t.
+ZOMBIE_ATTACK_COOLDOWN = 5
+SKELETON_RELOAD = 4
+
 # Row/column offsets of a step in each facing direction; direction ids are the move actions.
 DIRECTION_OFFSETS: dict[int, tuple[int, int]] = {
     Action.MOVE_LEFT: (0, -1),
