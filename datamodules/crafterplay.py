@@ -132,16 +132,12 @@ class CrafterPlayDataModule(L.LightningDataModule):
             pipeline = pipeline.with_epoch(per_worker)
         return EpochSeededStream(pipeline, shuffles, run_seed(hp.seed), first_epoch)
 
-    def _trainer_epoch(self) -> int | None:
-        return self.trainer.current_epoch if self.trainer is not None else None
-
     def _loader(self, split: str) -> DataLoader:
-        stream = self.dataset(split)
-        stream.current_epoch = self._trainer_epoch  # a resumed fit: the restored epoch
         return seeded_loader(
-            stream,
+            self.dataset(split),
             self.hparams.num_workers,
             self.hparams.pin_memory and torch.cuda.is_available(),
+            self.trainer,
         )
 
     def train_dataloader(self) -> DataLoader:

@@ -21,6 +21,7 @@ import multiprocessing
 import os
 import random
 from collections.abc import Callable, Iterable, Iterator
+from typing import Any
 
 from torch.utils.data import DataLoader, IterableDataset
 from webdataset.utils import pytorch_worker_info
@@ -75,7 +76,7 @@ class EpochSeededStream(IterableDataset):
         shuffles: list[SeededShuffle],
         seed: int,
         first_epoch: int = 0,
-        current_epoch: Callable[[], int | None] | None = None,
+        current_epoch: Callable[[], int] | None = None,
     ) -> None:
         self.pipeline = pipeline
         self.shuffles = shuffles
@@ -84,9 +85,8 @@ class EpochSeededStream(IterableDataset):
         self.current_epoch = current_epoch
 
     def _follow_trainer(self) -> None:
-        epoch = self.current_epoch() if self.current_epoch is not None else None
-        if epoch is not None:
-            self.next_epoch = epoch
+        if self.current_epoch is not None:
+            self.next_epoch = self.current_epoch()
 
     def __getstate__(self) -> dict:
         # pickled into DataLoader workers as the first epoch they serve starts
@@ -101,13 +101,20 @@ class EpochSeededStream(IterableDataset):
         return iter(self.pipeline)
 
 
-def seeded_loader(dataset: IterableDataset, num_workers: int, pin_memory: bool) -> DataLoader:
+def seeded_loader(
+    dataset: IterableDataset, num_workers: int, pin_memory: bool, trainer: Any = None
+) -> DataLoader:
     """A DataLoader over a batched stream; workers are spawned and kept across epochs.
+
+    With a ``trainer``, an ``EpochSeededStream`` follows its ``current_epoch`` (so a resumed
+    fit continues the straight fit's order).
 
     Spawned, not forked: JAX (loaded by the envs and experts) runs threads, and forking a
     process with threads can deadlock the child. Kept alive: ``EpochSeededStream`` counts
     epochs in the workers' copies, and a spawn start (re-importing torch) is paid once.
     """
+    if trainer is not None and isinstance(dataset, EpochSeededStream):
+        dataset.current_epoch = lambda: trainer.current_epoch  # dropped when pickled
     workers = num_workers > 0
     return DataLoader(
         dataset,

@@ -8,6 +8,7 @@ import shutil
 import tarfile
 from collections import Counter
 from pathlib import Path
+from types import SimpleNamespace
 
 import lightning as L
 import numpy as np
@@ -196,10 +197,9 @@ def test_stream_takes_the_trainers_epoch_and_carries_it_into_workers(crafterplay
     # when iterated (main process) or when pickled into worker processes.
     kwargs = dict(seq_len=8, batch_size=2, val_fraction=0.0, test_fraction=0.0, seed=3)
     epochs = _order(seeded_loader(_module(crafterplay, **kwargs).dataset("train"), 0, False), 4)
-    restored = {"epoch": 2}
-    stream = _module(crafterplay, **kwargs).dataset("train")
-    stream.current_epoch = lambda: restored["epoch"]
-    assert _order(seeded_loader(stream, 0, False), 1) == [epochs[2]]
-    in_worker = pickle.loads(pickle.dumps(stream))  # what a spawned worker receives
+    trainer = SimpleNamespace(current_epoch=2)  # as restored from a checkpoint
+    loader = seeded_loader(_module(crafterplay, **kwargs).dataset("train"), 0, False, trainer)
+    assert _order(loader, 1) == [epochs[2]]
+    in_worker = pickle.loads(pickle.dumps(loader.dataset))  # what a spawned worker receives
     assert in_worker.current_epoch is None
     assert _order(seeded_loader(in_worker, 0, False), 2) == epochs[2:4]
