@@ -20,12 +20,20 @@ sees the batches a straight one would from its next epoch, and DataLoader worker
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Iterator
+
 import lightning as L
 import torch
 import webdataset as wds
 from torch.utils.data import DataLoader
 
-from datamodules.seeded_shuffle import EpochSeededStream, SeededShuffle, run_seed, seeded_loader
+from datamodules.seeded_shuffle import (
+    EpochSeeded,
+    EpochSeededStream,
+    SeededShuffle,
+    run_seed,
+    seeded_loader,
+)
 from zoo.data.sequences import (
     SPLITS,
     ShardSources,
@@ -40,6 +48,9 @@ from zoo.data.sequences import (
 
 class CrafterPlayDataModule(L.LightningDataModule):
     """Streams CrafterPlay shards as batches of long, noop-filtered sequences."""
+
+    extra_keys: tuple[str, ...] = ()
+    """Per-step arrays beyond frames/actions/first/episode/step that batches carry."""
 
     def __init__(
         self,
@@ -106,20 +117,23 @@ class CrafterPlayDataModule(L.LightningDataModule):
             raise ValueError(f"unknown split {split!r}; expected one of {SPLITS}")
         hp = self.hparams
         train = split == "train"
-        shuffles: list[SeededShuffle] = []
+        shuffles: list[EpochSeeded] = []
         stages = [self.shards, wds.split_by_node, wds.split_by_worker]
         if train:
             shuffles.append(SeededShuffle(len(self.shards), salt=0))
         stages += shuffles
+        reader = self.chunk_reader()
+        if train and hasattr(reader, "start_epoch"):
+            shuffles.append(reader)  # its randomness follows the epoch like the shuffles'
         stages += [
-            wds.pipelinefilter(read_shards)(hp.skip_corrupt),
+            reader,
             wds.pipelinefilter(select_split)(
                 split, hp.val_fraction, hp.test_fraction, hp.split_salt
             ),
         ]
         if hp.noop_filter:
             stages.append(wds.pipelinefilter(filter_noop_chunks)(hp.min_noop_run))
-        stages.append(wds.pipelinefilter(pack_sequences)(hp.seq_len))
+        stages.append(wds.pipelinefilter(pack_sequences)(hp.seq_len, self.extra_keys))
         if train and hp.shuffle_buffer > 1:
             shuffles.append(SeededShuffle(hp.shuffle_buffer, salt=1))
             stages.append(shuffles[-1])
@@ -131,6 +145,10 @@ class CrafterPlayDataModule(L.LightningDataModule):
             per_worker = max(1, hp.train_batches_per_epoch // max(1, hp.num_workers))
             pipeline = pipeline.with_epoch(per_worker)
         return EpochSeededStream(pipeline, shuffles, run_seed(hp.seed), first_epoch)
+
+    def chunk_reader(self) -> Callable[[Iterable[dict]], Iterator[dict]]:
+        """The stage that turns shard sources into chunks (subclasses attach more per step)."""
+        return wds.pipelinefilter(read_shards)(self.hparams.skip_corrupt)
 
     def _loader(self, split: str) -> DataLoader:
         return seeded_loader(

@@ -21,7 +21,7 @@ import multiprocessing
 import os
 import random
 from collections.abc import Callable, Iterable, Iterator
-from typing import Any
+from typing import Any, Protocol
 
 from torch.utils.data import DataLoader, IterableDataset
 from webdataset.utils import pytorch_worker_info
@@ -32,6 +32,12 @@ def run_seed(seed: int | None) -> int:
     if seed is not None:
         return seed
     return int(os.environ.get("PL_GLOBAL_SEED", 0))
+
+
+class EpochSeeded(Protocol):
+    """A pipeline stage whose randomness is a function of (seed, epoch)."""
+
+    def start_epoch(self, seed: int, epoch: int) -> None: ...
 
 
 class SeededShuffle:
@@ -73,7 +79,7 @@ class EpochSeededStream(IterableDataset):
     def __init__(
         self,
         pipeline: Iterable,
-        shuffles: list[SeededShuffle],
+        shuffles: list[EpochSeeded],
         seed: int,
         first_epoch: int = 0,
         current_epoch: Callable[[], int] | None = None,
@@ -126,4 +132,4 @@ def seeded_loader(
     )
 
 
-__all__ = ["EpochSeededStream", "SeededShuffle", "run_seed", "seeded_loader"]
+__all__ = ["EpochSeeded", "EpochSeededStream", "SeededShuffle", "run_seed", "seeded_loader"]

@@ -22,6 +22,7 @@ TOP_LEVEL = (
     ("zoo.experts.cli", "register"),
     ("zoo.export_cli", "register"),
     ("zoo.demo", "register"),
+    ("zoo.agents.play", "register"),
 )
 
 

@@ -69,11 +69,17 @@ def _sha256(path: Path) -> str:
 def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> Path:
     """Write the network of a Lightning checkpoint as safetensors + config + checksums."""
     config, state_dict = _read_lightning_checkpoint(ckpt_path)
-    _build(config, state_dict)  # fail here, not at load time, if weights and config disagree
+    # _build fails here, not at load time, if weights and config disagree
+    return save_exported(_build(config, state_dict), out_dir)
+
+
+def save_exported(model: CVPTModel, out_dir: str | Path) -> Path:
+    """Write a C-VPT network as safetensors + config + checksums (what ``load_exported`` reads)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    state_dict = model.state_dict()
     save_file({k: v.contiguous() for k, v in state_dict.items()}, out / WEIGHTS_FILE)
-    (out / CONFIG_FILE).write_text(json.dumps(config.to_dict(), indent=2) + "\n")
+    (out / CONFIG_FILE).write_text(json.dumps(model.config.to_dict(), indent=2) + "\n")
     lines = [f"{_sha256(out / name)}  {name}\n" for name in (WEIGHTS_FILE, CONFIG_FILE)]
     (out / CHECKSUM_FILE).write_text("".join(lines))
     return out

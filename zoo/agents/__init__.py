@@ -6,28 +6,40 @@ from pathlib import Path
 
 from zoo.agents.base import Agent, RandomAgent
 
-AGENT_NAMES = ("random", "scripted", "ppo", "cvpt")
+AGENT_NAMES = ("random", "scripted", "ppo", "cvpt", "csteve1")
 
 
 def make_agent(
-    name: str, num_envs: int, checkpoint: str | None = None, temperature: float = 1.0
+    name: str,
+    num_envs: int,
+    checkpoint: str | None = None,
+    temperature: float = 1.0,
+    cclip: str | None = None,
+    prior: str | None = None,
+    cfg_scale: float = 1.5,
 ) -> Agent:
     """Build the named agent for ``num_envs`` envs; ``checkpoint`` is required by trained ones.
 
-    ``temperature`` scales a sampling policy's logits (C-VPT); 0 plays the most likely action.
+    ``temperature`` scales a sampling policy's logits (C-VPT, C-Steve-1); 0 plays the most
+    likely action. C-Steve-1 reads text instructions through ``cclip`` (its C-CLIP checkpoint)
+    and ``prior`` (the CVAE prior's), and guides with ``cfg_scale`` (paper: 1.5).
     """
     if temperature < 0:
         raise ValueError(f"temperature must be >= 0, got {temperature}")
-    if temperature != 1.0 and name != "cvpt":
-        raise ValueError(f"temperature applies to the cvpt agent only, not {name!r}")
+    if temperature != 1.0 and name not in ("cvpt", "csteve1"):
+        raise ValueError(f"temperature applies to the cvpt and csteve1 agents only, not {name!r}")
     if name == "random":
         return RandomAgent(num_envs)
     if name == "scripted":
         from zoo.experts.scripted import ScriptedExpert
 
         return ScriptedExpert(num_envs)
-    if name in ("ppo", "cvpt") and checkpoint is None:
-        kind = "a PPO expert checkpoint dir" if name == "ppo" else "a C-VPT .ckpt or export dir"
+    if name in ("ppo", "cvpt", "csteve1") and checkpoint is None:
+        kind = {
+            "ppo": "a PPO expert checkpoint dir",
+            "cvpt": "a C-VPT .ckpt or export dir",
+            "csteve1": "a C-Steve-1 .ckpt",
+        }[name]
         raise ValueError(f"agent {name!r} needs --checkpoint PATH ({kind})")
     if name == "ppo":
         from zoo.experts.ppo import PPOExpert
@@ -40,6 +52,16 @@ def make_agent(
         return CVPTAgent.from_checkpoint(
             checkpoint, num_envs, temperature=1.0 if greedy else temperature, greedy=greedy
         )
+    if name == "csteve1":
+        from zoo.agents.steve_agent import GoalEncoder, SteveAgent, StevePolicy
+
+        greedy = temperature == 0
+        policy = StevePolicy.load(
+            checkpoint, cfg_scale=cfg_scale, temperature=1.0 if greedy else temperature,
+            greedy=greedy,
+        )
+        goals = GoalEncoder.load(cclip, prior) if cclip is not None else None
+        return SteveAgent(policy, goals, num_envs)
     raise ValueError(f"unknown agent {name!r}; expected one of {AGENT_NAMES}")
 
 
@@ -47,11 +69,14 @@ def checkpoint_kind(path: str | Path) -> str:
     """Which trained agent a checkpoint holds, from its layout alone.
 
     A PPO run or checkpoint folder has ``meta.json`` files; a C-VPT export folder has
-    ``model.safetensors``; a Lightning ``.ckpt`` file is a C-VPT run.
+    ``model.safetensors``; a Lightning ``.ckpt`` file is a C-Steve-1 run when its
+    hyper-parameters name a backbone, otherwise a C-VPT run.
     """
     path = Path(path)
     if path.is_file() and path.suffix == ".ckpt":
-        return "cvpt"
+        from zoo.agents.steve_agent import is_steve_checkpoint, read_checkpoint
+
+        return "csteve1" if is_steve_checkpoint(read_checkpoint(path)) else "cvpt"
     if path.is_dir():
         if (path / "model.safetensors").is_file():
             return "cvpt"
@@ -63,9 +88,12 @@ def checkpoint_kind(path: str | Path) -> str:
     )
 
 
-def load_checkpoint_agent(path: str | Path, num_envs: int, temperature: float = 1.0) -> Agent:
-    """The trained agent stored at ``path`` (see ``checkpoint_kind``), for ``num_envs`` envs."""
-    return make_agent(checkpoint_kind(path), num_envs, str(path), temperature)
+def load_checkpoint_agent(
+    path: str | Path, num_envs: int, temperature: float = 1.0, **options
+) -> Agent:
+    """The trained agent stored at ``path`` (see ``checkpoint_kind``), for ``num_envs`` envs;
+    ``options`` are ``make_agent``'s C-Steve-1 arguments (cclip, prior, cfg_scale)."""
+    return make_agent(checkpoint_kind(path), num_envs, str(path), temperature, **options)
 
 
 __all__ = [

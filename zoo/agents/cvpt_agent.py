@@ -13,6 +13,19 @@ from zoo.models.cvpt import CVPTModel
 from zoo.models.trxl import TrXLState
 
 
+def sample_actions(
+    logits: torch.Tensor, temperature: float, greedy: bool, uniforms: np.ndarray
+) -> np.ndarray:
+    """One action per row of (N, A) logits: argmax if ``greedy``, else inverse-CDF sampling of
+    softmax(logits / temperature) driven by ``uniforms`` (N,) in [0, 1)."""
+    if greedy:
+        return logits.argmax(-1).cpu().numpy()
+    probs = torch.softmax(logits.float() / temperature, dim=-1).double().cpu().numpy()
+    cdf = np.cumsum(probs, axis=-1)
+    actions = (np.asarray(uniforms)[:, None] * cdf[:, -1:] >= cdf).sum(-1)
+    return np.minimum(actions, probs.shape[-1] - 1)
+
+
 class CVPTPolicy:
     """Steps N envs one frame at a time; the state is a rolling memory of the last M steps.
 
@@ -76,13 +89,8 @@ class CVPTPolicy:
         each env its own seeded stream; by default they come from the policy's generator.
         """
         logits, state = self.logits(frames, state, first)
-        if self.greedy:
-            return logits.argmax(-1).cpu().numpy(), state
-        probs = torch.softmax(logits / self.temperature, dim=-1).double().cpu().numpy()
-        u = self._rng.random(len(probs)) if uniforms is None else np.asarray(uniforms)
-        cdf = np.cumsum(probs, axis=-1)
-        actions = (u[:, None] * cdf[:, -1:] >= cdf).sum(-1)
-        return np.minimum(actions, probs.shape[-1] - 1), state
+        u = self._rng.random(len(logits)) if uniforms is None else np.asarray(uniforms)
+        return sample_actions(logits, self.temperature, self.greedy, u), state
 
 
 class CVPTAgent:

@@ -24,7 +24,7 @@ SEQUENCE_KEYS = ("frames", "actions", "first", "episode", "step")
 
 
 class ShardSources(IterableDataset):
-    """{"url", "episodes"} per shard of a CrafterPlay folder, in index order, from its manifest:
+    """{"url", "episodes", "index"} per shard of a CrafterPlay folder, in index order, from its manifest:
     the first stage of a webdataset pipeline (like ``SimpleShardList``, plus episode counts)."""
 
     def __init__(self, root: str | Path) -> None:
@@ -33,7 +33,8 @@ class ShardSources(IterableDataset):
             raise FileNotFoundError(f"{Path(root) / MANIFEST} not found: not a CrafterPlay folder")
         entries = sorted(manifest["shards"], key=lambda e: e["index"])
         self.sources = [
-            {"url": str(Path(root) / e["file"]), "episodes": int(e["episodes"])} for e in entries
+            {"url": str(Path(root) / e["file"]), "episodes": int(e["episodes"]), "index": e["index"]}
+            for e in entries
         ]
 
     def __len__(self) -> int:
@@ -102,14 +103,17 @@ def filter_noop_chunks(chunks: Iterable[dict], min_run: int) -> Iterator[dict]:
         yield filter_noops(chunk, min_run=min_run)
 
 
-def pack_sequences(chunks: Iterable[dict], seq_len: int) -> Iterator[dict]:
+def pack_sequences(
+    chunks: Iterable[dict], seq_len: int, extra_keys: tuple[str, ...] = ()
+) -> Iterator[dict]:
     """Join consecutive chunks into sequences of exactly ``seq_len`` steps.
 
     ``first`` is True at the first step of a chunk whose episode differs from the previous
     chunk's (so at each episode's first kept step). A shorter remainder at the end of the
-    stream is dropped.
+    stream is dropped. ``extra_keys`` are further per-step arrays of the chunks to carry
+    along (C-Steve-1's goals).
     """
-    pending: dict[str, list[np.ndarray]] = {key: [] for key in SEQUENCE_KEYS}
+    pending: dict[str, list[np.ndarray]] = {key: [] for key in (*SEQUENCE_KEYS, *extra_keys)}
     size = 0
     previous_episode = None
     for chunk in chunks:
@@ -126,6 +130,8 @@ def pack_sequences(chunks: Iterable[dict], seq_len: int) -> Iterator[dict]:
         pending["episode"].append(np.full(n, episode, dtype=np.int64))
         in_chunk = chunk.get("step_index", np.arange(n))  # filtered chunks say which steps stayed
         pending["step"].append(int(chunk["meta"]["offset"]) + np.asarray(in_chunk, np.int64))
+        for key in extra_keys:
+            pending[key].append(chunk[key])
         size += n
         while size >= seq_len:
             joined = {key: np.concatenate(parts) for key, parts in pending.items()}
@@ -135,4 +141,4 @@ def pack_sequences(chunks: Iterable[dict], seq_len: int) -> Iterator[dict]:
 
 
 def collate_sequences(samples: list[dict]) -> dict[str, torch.Tensor]:
-    return {key: torch.from_numpy(np.stack([s[key] for s in samples])) for key in SEQUENCE_KEYS}
+    return {key: torch.from_numpy(np.stack([s[key] for s in samples])) for key in samples[0]}

@@ -1,0 +1,137 @@
+"""C-Steve-1 speed on this machine (CPU) -> bench/results/steve.json.
+
+Measures, in one run on the same batch of N envs (frames 144 px, C-VPT tiny at 72 px as in
+configs/csteve1_cpu.yaml):
+  * one acting step of C-VPT (``CVPTPolicy.act``) against C-Steve-1 with classifier-free
+    guidance (``StevePolicy.act``, both passes in one forward) and C-Steve-1 without guidance
+    (cfg_scale 0), for head conditioning (the paper's) and TrXL-input conditioning (whose two
+    passes both run the Transformer-XL); goal: guidance costs <= 1.3x a C-VPT step;
+  * one C-Steve-1 training step (LoRA + conditioning, encoder frozen) against one C-VPT
+    training step on the same batch.
+Each timing is the median of ``--repeats`` after warm-up; ratios compare timings of this run.
+
+  nice -n 10 .venv/bin/python bench/bench_steve.py
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from zoo.agents.cvpt_agent import CVPTPolicy
+from zoo.agents.steve_agent import StevePolicy
+from zoo.models.cvpt import CVPTConfig, CVPTModel
+from zoo.models.steve import SteveConfig, SteveModel
+
+RESULTS = Path(__file__).parent / "results" / "steve.json"
+
+
+def _median_seconds(fn, repeats: int, warmup: int = 3) -> float:
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def _backbone(seed: int = 0) -> CVPTModel:
+    torch.manual_seed(seed)
+    return CVPTModel(CVPTConfig.from_name("tiny", input_downsample=2))
+
+
+def acting(num_envs: int, repeats: int) -> dict:
+    """Seconds per acting step for N envs (memory filled by warm-up steps first)."""
+    rng = np.random.default_rng(0)
+    frames = rng.integers(0, 256, (num_envs, 144, 144, 3), dtype=np.uint8)
+    goals = torch.nn.functional.normalize(torch.randn(num_envs, 512), dim=-1)
+    uniforms = rng.random(num_envs)
+    cvpt = CVPTPolicy(_backbone())
+    out: dict = {}
+    state = [cvpt.initial_state(num_envs)]
+
+    def cvpt_step() -> None:
+        _, state[0] = cvpt.act(frames, state[0], uniforms=uniforms)
+
+    out["cvpt_s"] = _median_seconds(cvpt_step, repeats)
+    for conditioning in ("head", "trxl_input"):
+        for scale in (1.5, 0.0):
+            steve = StevePolicy(
+                SteveModel(_backbone(), SteveConfig(goal_dim=512, conditioning=conditioning)),
+                cfg_scale=scale,
+            )
+            steve_state = [steve.initial_state(num_envs)]
+
+            def steve_step() -> None:
+                _, steve_state[0] = steve.act(frames, goals, steve_state[0], uniforms=uniforms)
+
+            key = f"steve_{conditioning}_cfg{scale}"
+            out[f"{key}_s"] = _median_seconds(steve_step, repeats)
+            out[f"{key}_over_cvpt"] = out[f"{key}_s"] / out["cvpt_s"]
+    return out
+
+
+def training(batch: int, seq_len: int, repeats: int) -> dict:
+    """Seconds per forward + backward + AdamW step on one in-memory batch."""
+    g = torch.Generator().manual_seed(0)
+    frames = torch.randint(0, 256, (batch, seq_len, 144, 144, 3), dtype=torch.uint8, generator=g)
+    first = torch.zeros(batch, seq_len, dtype=torch.bool)
+    first[:, 0] = True
+    actions = torch.randint(0, 17, (batch, seq_len), generator=g)
+    goal = torch.randn(batch, seq_len, 512, generator=g)
+
+    def step_fn(model, inputs, params):
+        optimizer = torch.optim.AdamW(params, lr=1e-4)
+
+        def step() -> None:
+            with torch.autocast("cpu", dtype=torch.bfloat16):
+                logits, _ = model(*inputs, model.initial_state(batch))
+            loss = torch.nn.functional.cross_entropy(logits.flatten(0, 1).float(), actions.flatten())
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+
+        return step
+
+    cvpt = _backbone().train()
+    steve = SteveModel(_backbone(), SteveConfig(goal_dim=512)).train()
+    cvpt_s = _median_seconds(step_fn(cvpt, (frames, first), cvpt.parameters()), repeats, 1)
+    steve_s = _median_seconds(
+        step_fn(steve, (frames, first, goal), steve.trainable_parameters().values()), repeats, 1
+    )
+    return {"batch": batch, "seq_len": seq_len, "cvpt_train_s": cvpt_s, "steve_train_s": steve_s,
+            "steve_over_cvpt": steve_s / cvpt_s,
+            "trainable_params": sum(p.numel() for p in steve.trainable_parameters().values()),
+            "all_params": sum(p.numel() for p in steve.parameters())}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--num-envs", type=int, default=16)
+    parser.add_argument("--repeats", type=int, default=30)
+    parser.add_argument("--threads", type=int, default=1)
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    with torch.no_grad():
+        act = acting(args.num_envs, args.repeats)
+    results = {
+        "machine": {"cpu": platform.processor() or platform.machine(), "threads": args.threads},
+        "acting": {"num_envs": args.num_envs, **act},
+        "training": training(8, 64, max(3, args.repeats // 6)),
+    }
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(results, indent=2) + "\n")
+    print(json.dumps(results, indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,129 @@
+"""CrafterPlay with hindsight-relabelled goals for C-Steve-1 (paper §4.3, "Dataset Generation").
+
+The CrafterPlay pipeline (shard order, episode splits, noop filter, packing, seeded shuffles)
+unchanged, with one more per-step input: each chunk is read together with its ``zoo data
+embed`` shard and relabelled (``zoo.data.goals.GoalAttacher``, ``zoo.data.relabel``). Batches
+are {frames, actions, first, episode, step} as for C-VPT plus goal float16 (B, S, D),
+goal_mask bool (B, S) (False on unconditional pieces, whose goal is zeros) and goal_step int64
+(B, S) (the episode step whose clip is the goal).
+
+Training goals are redrawn every epoch from (seed, epoch, episode); validation and test goals
+are those of epoch 0, so their losses are comparable across a run.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Iterable, Iterator
+
+from datamodules.crafterplay import CrafterPlayDataModule
+from zoo.data.embed import check_embeddings_match, load_embedding_manifest
+from zoo.data.goals import GOAL_KEYS, GoalAttacher
+from zoo.data.relabel import RelabelMode, RelabelParams
+from zoo.data.sequences import ShardSources
+
+
+class SteveDataModule(CrafterPlayDataModule):
+    """CrafterPlay sequences with relabelled C-CLIP goals (see the module docstring)."""
+
+    extra_keys = GOAL_KEYS
+
+    def __init__(
+        self,
+        root: str,
+        embeddings: str,
+        relabel: RelabelMode = "event",
+        min_gap: int = 1,
+        max_gap: int = 10,
+        uncond_prob: float = 0.1,
+        partial_embeddings: bool = False,
+        seq_len: int = 640,
+        batch_size: int = 128,
+        num_workers: int = 4,
+        noop_filter: bool = True,
+        min_noop_run: int = 20,
+        val_fraction: float = 0.05,
+        test_fraction: float = 0.05,
+        split_salt: int = 0,
+        shuffle_buffer: int = 64,
+        train_batches_per_epoch: int | None = None,
+        pin_memory: bool = True,
+        seed: int | None = None,
+        skip_corrupt: bool = False,
+    ) -> None:
+        """Args:
+            root: CrafterPlay folder (manifest.json + shards).
+            embeddings: its ``zoo data embed`` folder (C-CLIP goal embeddings + step captions).
+            relabel: ``event`` (the paper's event-based packing) or ``plain`` (STEVE-1's), for
+                the relabelling ablation.
+            min_gap: fewest steps a goal lies ahead (paper: 1).
+            max_gap: most steps a goal lies ahead (paper: 10).
+            uncond_prob: share of pieces without a goal, for classifier-free guidance (paper: 0.1).
+            partial_embeddings: train on the CrafterPlay shards that ``embeddings`` covers (a
+                ``zoo data embed --shards A:B`` run) instead of refusing an incomplete folder.
+            seq_len: steps per sequence (paper: 640).
+            batch_size: sequences per batch (paper: 128).
+            num_workers: DataLoader workers; each reads different shards.
+            noop_filter: drop noop runs shorter than ``min_noop_run``.
+            min_noop_run: noop runs at least this long are kept.
+            val_fraction: share of episodes in the validation split.
+            test_fraction: share of episodes in the test split.
+            split_salt: changes which episodes land in which split.
+            shuffle_buffer: training sequences held for shuffling.
+            train_batches_per_epoch: epoch length in batches; None: one pass.
+            pin_memory: page-locked batches for faster host-to-GPU copies.
+            seed: seed of the training order and the goals; None: ``seed_everything``'s.
+            skip_corrupt: skip unreadable shards with a warning instead of stopping.
+        """
+        super().__init__(
+            root=root,
+            seq_len=seq_len,
+            batch_size=batch_size,
+            num_workers=num_workers,
+            noop_filter=noop_filter,
+            min_noop_run=min_noop_run,
+            val_fraction=val_fraction,
+            test_fraction=test_fraction,
+            split_salt=split_salt,
+            shuffle_buffer=shuffle_buffer,
+            train_batches_per_epoch=train_batches_per_epoch,
+            pin_memory=pin_memory,
+            seed=seed,
+            skip_corrupt=skip_corrupt,
+        )
+        self.save_hyperparameters()  # after the parent's: this subclass's arguments win
+        self.relabel_params = RelabelParams(relabel, min_gap, max_gap, uncond_prob)
+        self._embeddings_checked = False
+
+    @property
+    def shards(self) -> ShardSources:
+        """The CrafterPlay shards, restricted to the embedded ones with ``partial_embeddings``."""
+        if self._shards is None:
+            shards = super().shards
+            if self.hparams.partial_embeddings:
+                manifest = load_embedding_manifest(self.hparams.embeddings)
+                embedded = {int(entry["index"]) for entry in manifest["shards"]}
+                total = len(shards.sources)
+                shards.sources = [s for s in shards.sources if int(s["index"]) in embedded]
+                warnings.warn(
+                    f"training on the {len(shards.sources)} of {total} CrafterPlay shards that "
+                    f"{self.hparams.embeddings} covers (partial_embeddings=true)",
+                    stacklevel=2,
+                )
+        return self._shards
+
+    @property
+    def goal_dim(self) -> int:
+        """Width of the goal embeddings (the C-CLIP embedding size)."""
+        return GoalAttacher(self.hparams.embeddings, self.relabel_params, False).embed_dim
+
+    def chunk_reader(self) -> Callable[[Iterable[dict]], Iterator[dict]]:
+        if not self._embeddings_checked:  # here, not in __init__: a config check reads no data
+            check_embeddings_match(
+                self.hparams.embeddings, self.hparams.root, self.hparams.partial_embeddings
+            )
+            self._embeddings_checked = True
+        return GoalAttacher(self.hparams.embeddings, self.relabel_params, self.hparams.skip_corrupt)
+
+
+__all__ = ["SteveDataModule"]

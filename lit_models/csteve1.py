@@ -1,0 +1,97 @@
+"""C-Steve-1 training (paper §4.3): goal-conditioned behaviour cloning on relabelled CrafterPlay.
+
+Loss -log pi(a_t | o_1:t, z_1:t) over TBPTT windows, the loop C-VPT uses
+(``lit_models.sequence_bc.SequenceBC``); the network is ``zoo.models.steve.SteveModel``: a C-VPT
+loaded from ``backbone`` (a ``zoo fit`` checkpoint or ``zoo export`` folder), LoRA on its
+Transformer-XL and a zero-initialised conditioning layer, the only parameters that train.
+
+The network is built in ``configure_model``: from the backbone file on a first build, which
+writes the backbone's architecture into the hyper-parameters (``backbone_config``), so
+``CSteve1.load_from_checkpoint(path)`` rebuilds it without that file. Building a module from a
+config reads no file (``zoo fit --print_config`` and config checks work anywhere).
+"""
+
+from __future__ import annotations
+
+from lit_models.sequence_bc import SequenceBC
+from zoo.export import load_policy_model
+from zoo.models.cvpt import CVPTConfig, CVPTModel
+from zoo.models.steve import Conditioning, SteveConfig, SteveModel
+
+
+class CSteve1(SequenceBC):
+    """Goal-conditioned C-VPT with LoRA, trained on SteveDataModule batches."""
+
+    condition_keys = ("goal",)
+
+    def __init__(
+        self,
+        backbone: str | None = None,
+        goal_dim: int = 512,
+        conditioning: Conditioning = "head",
+        lora_rank: int = 16,
+        lora_alpha: float = 16.0,
+        lora_dropout: float = 0.0,
+        lora_targets: list[str] | None = None,
+        tbptt_len: int = 64,
+        lr: float = 1e-5,
+        weight_decay: float = 1e-4,
+        betas: tuple[float, float] = (0.9, 0.999),
+        warmup_steps: int = 0,
+        cosine_steps: int | None = None,
+        min_lr_ratio: float = 0.0,
+        label_smoothing: float = 0.0,
+        activation_checkpointing: bool = True,
+        backbone_config: dict | None = None,
+    ) -> None:
+        """Args:
+            backbone: the C-VPT to start from: a ``zoo fit`` .ckpt or a ``zoo export`` folder.
+            goal_dim: goal embedding width; must equal the C-CLIP embedding size of the data.
+            conditioning: ``head`` (the paper's) or ``trxl_input`` (STEVE-1's; the ablation).
+            lora_rank: LoRA rank on the Transformer-XL (0: train the conditioning layer only).
+            lora_alpha: LoRA scale numerator.
+            lora_dropout: dropout on the LoRA branch.
+            lora_targets: TrXL linear layers given LoRA (None: query, key_value, out, ff.0, ff.3).
+            tbptt_len: window of truncated backprop (paper: 64).
+            lr: peak AdamW learning rate (paper: 1e-5).
+            weight_decay: AdamW decay of weight matrices (paper: 1e-4).
+            betas: AdamW betas.
+            warmup_steps: optimizer steps of linear warmup (paper: 10M frames).
+            cosine_steps: steps of the cosine decay (None: trainer.max_steps).
+            min_lr_ratio: final LR as a fraction of ``lr``.
+            label_smoothing: cross-entropy label smoothing.
+            activation_checkpointing: recompute each TBPTT window in backward.
+            backbone_config: the backbone's C-VPT config; filled in from ``backbone`` on first
+                build (leave it unset).
+        """
+        super().__init__()
+        self.save_hyperparameters()
+        if backbone is None and backbone_config is None:
+            raise ValueError(
+                "model.init_args.backbone is required: a C-VPT .ckpt from `zoo fit` or a "
+                "`zoo export` folder to start C-Steve-1 from"
+            )
+        self.setup_metrics(CVPTConfig().num_actions)
+
+    def configure_model(self) -> None:
+        """Build the network (Lightning calls this before training and before loading a
+        checkpoint): from the backbone file on a first build, else from ``backbone_config``."""
+        if hasattr(self, "model"):
+            return
+        if self.hparams.backbone_config is None:
+            cvpt = load_policy_model(self.hparams.backbone).train()
+            self.hparams["backbone_config"] = cvpt.config.to_dict()
+        else:
+            cvpt = CVPTModel(CVPTConfig.from_dict(self.hparams.backbone_config))
+        self.model = SteveModel(cvpt, SteveConfig.from_hparams(dict(self.hparams)))
+
+    def on_fit_start(self) -> None:
+        data_dim = getattr(self.trainer.datamodule, "goal_dim", None)
+        if data_dim is not None and data_dim != self.hparams.goal_dim:
+            raise ValueError(
+                f"model.init_args.goal_dim={self.hparams.goal_dim} but the data's goal embeddings "
+                f"(data.init_args.embeddings) have {data_dim} dimensions: set goal_dim={data_dim}"
+            )
+
+
+__all__ = ["CSteve1"]

@@ -1,0 +1,144 @@
+"""Behaviour cloning of a Transformer-XL policy on long sequences: what C-VPT and C-Steve-1 share.
+
+Truncated BPTT: a batch holds long sequences (paper: 640 steps) that the module cuts into
+windows of ``tbptt_len`` (64). The TrXL memory flows from one window into the next with
+stop-gradient, and the optimizer steps once per batch on the mean loss over all steps, so
+the usual Lightning loop (gradient clipping, AMP, DDP, accumulation) applies unchanged. With
+``activation_checkpointing`` each window is recomputed during backward, so activation memory
+is one window's, not the whole sequence's, for ~1/3 more compute.
+
+A subclass builds ``self.model`` (called as ``model(frames, first, *conditions, state)``), says
+which batch entries are its conditions (``condition_keys``: none for C-VPT, the goal for
+C-Steve-1) and calls ``save_hyperparameters`` with lr, weight_decay, betas, warmup_steps,
+cosine_steps, min_lr_ratio, label_smoothing, tbptt_len and activation_checkpointing among them.
+Only parameters with ``requires_grad`` reach the optimizer (C-Steve-1 trains LoRA and its
+conditioning layer alone).
+"""
+
+from __future__ import annotations
+
+import lightning as L
+import torch
+from torch import nn
+from torch.nn import functional as F
+from torch.utils.checkpoint import checkpoint
+from torchmetrics import MetricCollection
+from torchmetrics.classification import MulticlassAccuracy
+
+from lit_models.schedules import WarmupCosine
+
+IGNORE_ACTION = -1  # the episode's final observation has no action
+
+
+def accuracy_metrics(num_actions: int, prefix: str) -> MetricCollection:
+    return MetricCollection(
+        {
+            "acc": MulticlassAccuracy(num_actions, average="micro", ignore_index=IGNORE_ACTION),
+            "acc_macro": MulticlassAccuracy(num_actions, average="macro", ignore_index=IGNORE_ACTION),
+        },
+        prefix=prefix,
+    )
+
+
+class SequenceBC(L.LightningModule):
+    """Cross-entropy on expert actions over TBPTT windows (see the module docstring)."""
+
+    model: nn.Module
+    condition_keys: tuple[str, ...] = ()
+
+    def setup_metrics(self, num_actions: int) -> None:
+        self.train_metrics = accuracy_metrics(num_actions, "train/")
+        self.val_metrics = accuracy_metrics(num_actions, "val/")
+        self.test_metrics = accuracy_metrics(num_actions, "test/")
+
+    def forward(self, frames: torch.Tensor, first: torch.Tensor, *conditions: torch.Tensor) -> torch.Tensor:
+        """Logits (B, T, num_actions) for whole sequences, window by window from empty memory."""
+        recompute = self.hparams.activation_checkpointing and self.training and torch.is_grad_enabled()
+        state = self.model.initial_state(frames.shape[0], frames.device)
+        window_logits = []
+        for start in range(0, frames.shape[1], self.hparams.tbptt_len):
+            window = slice(start, start + self.hparams.tbptt_len)
+            inputs = [frames[:, window], first[:, window], *(c[:, window] for c in conditions)]
+            if recompute:
+                logits, state = checkpoint(self.model, *inputs, state, use_reentrant=False)
+            else:
+                logits, state = self.model(*inputs, state)
+            window_logits.append(logits)
+        return torch.cat(window_logits, dim=1)
+
+    def batch_logits(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:
+        return self(batch["frames"], batch["first"], *(batch[k] for k in self.condition_keys))
+
+    def _loss(self, logits: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """Mean cross-entropy over the steps that have an action (0 if none has)."""
+        loss_sum = F.cross_entropy(
+            logits.flatten(0, 1).float(),
+            actions.flatten(),
+            ignore_index=IGNORE_ACTION,
+            reduction="sum",
+            label_smoothing=self.hparams.label_smoothing,
+        )
+        return loss_sum / (actions != IGNORE_ACTION).sum().clamp(min=1)
+
+    def training_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> torch.Tensor:
+        actions = batch["actions"]
+        logits = self.batch_logits(batch)
+        loss = self._loss(logits, actions)
+        batch_size = actions.shape[0]
+        self.log("train/loss", loss, prog_bar=True, batch_size=batch_size)
+        self.log("train/lr", self.lr_schedulers().get_last_lr()[0], batch_size=batch_size)
+        metrics = self.train_metrics(logits.detach().flatten(0, 1), actions.flatten())
+        self.log_dict(metrics, batch_size=batch_size)
+        return loss
+
+    def _eval_step(self, batch: dict[str, torch.Tensor], stage: str, metrics: MetricCollection) -> None:
+        actions = batch["actions"]
+        logits = self.batch_logits(batch)
+        loss = self._loss(logits, actions)
+        self.log(f"{stage}/loss", loss, prog_bar=True, batch_size=actions.shape[0], sync_dist=True)
+        metrics.update(logits.flatten(0, 1), actions.flatten())
+        self.log_dict(metrics, batch_size=actions.shape[0])
+
+    def validation_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> None:
+        self._eval_step(batch, "val", self.val_metrics)
+
+    def test_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> None:
+        self._eval_step(batch, "test", self.test_metrics)
+
+    def predict_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> dict[str, torch.Tensor]:
+        """Per step: the expert's action, the policy's distribution and its most likely action,
+        with the episode and step they belong to (``zoo predict`` writes these)."""
+        probs = torch.softmax(self.batch_logits(batch).float(), dim=-1)
+        return {
+            "episode": batch["episode"], "step": batch["step"], "action": batch["actions"],
+            "predicted": probs.argmax(-1), "probs": probs,
+        }
+
+    def configure_optimizers(self):
+        decay, no_decay = [], []
+        for module in self.model.modules():
+            for param in module.parameters(recurse=False):
+                if not param.requires_grad:
+                    continue
+                exempt = param.ndim < 2 or isinstance(module, (nn.Embedding, nn.LayerNorm))
+                (no_decay if exempt else decay).append(param)
+        optimizer = torch.optim.AdamW(
+            [
+                {"params": decay, "weight_decay": self.hparams.weight_decay},
+                {"params": no_decay, "weight_decay": 0.0},
+            ],
+            lr=self.hparams.lr,
+            betas=tuple(self.hparams.betas),
+        )
+        total = self.hparams.cosine_steps or self.trainer.max_steps
+        if total is None or total <= 0:
+            raise ValueError(
+                f"{type(self).__name__} needs the cosine length: set model.init_args.cosine_steps"
+                " or trainer.max_steps"
+            )
+        schedule = WarmupCosine(self.hparams.warmup_steps, total, self.hparams.min_lr_ratio)
+        scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, schedule)
+        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
+
+
+__all__ = ["IGNORE_ACTION", "SequenceBC", "accuracy_metrics"]

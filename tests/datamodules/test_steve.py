@@ -1,0 +1,96 @@
+"""C-Steve-1 data: CrafterPlay sequences with relabelled goals from `zoo data embed` shards."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from datamodules.steve import SteveDataModule
+from zoo.cli import main
+from zoo.data.embed import load_embedding_manifest, read_embedding_shard
+
+MAX_GAP = 6
+
+
+def _module(play: Path, embeddings: Path, **kwargs) -> SteveDataModule:
+    args = {
+        "max_gap": MAX_GAP, "seq_len": 32, "batch_size": 2, "num_workers": 0, "val_fraction": 0.0,
+        "test_fraction": 0.0, "shuffle_buffer": 1, "pin_memory": False, "noop_filter": False,
+        "seed": 0,
+    }
+    return SteveDataModule(str(play), str(embeddings), **{**args, **kwargs})
+
+
+def _batches(module: SteveDataModule, epoch: int = 0) -> list[dict[str, torch.Tensor]]:
+    return list(module.dataset("train", first_epoch=epoch))
+
+
+def _all_goals(embeddings: Path) -> dict[int, dict[str, np.ndarray]]:
+    out = {}
+    for entry in load_embedding_manifest(embeddings)["shards"]:
+        out.update(read_embedding_shard(embeddings / entry["file"]))
+    return out
+
+
+def test_batches_carry_goals_from_the_same_episode_within_the_gap(
+    steve_play: Path, steve_embeddings: Path
+) -> None:
+    batches = _batches(_module(steve_play, steve_embeddings))
+    stored = _all_goals(steve_embeddings)
+    assert batches
+    for batch in batches:
+        b, s = batch["actions"].shape
+        assert batch["goal"].shape == (b, s, 64) and batch["goal"].dtype == torch.float16
+        assert batch["goal_mask"].dtype == torch.bool and batch["goal_step"].dtype == torch.int64
+        ahead = batch["goal_step"] - batch["step"]
+        assert (ahead >= 0).all() and (ahead < MAX_GAP).all()
+        for i in range(b):
+            for t in range(s):
+                episode, goal_step = int(batch["episode"][i, t]), int(batch["goal_step"][i, t])
+                assert goal_step < len(stored[episode]["goal"]), "goal outside its episode"
+                expected = stored[episode]["goal"][goal_step] if batch["goal_mask"][i, t] else 0
+                np.testing.assert_array_equal(batch["goal"][i, t].numpy(), expected)
+
+
+def test_goals_follow_the_seed_and_change_with_the_epoch(
+    steve_play: Path, steve_embeddings: Path
+) -> None:
+    def goal_steps(seed: int, epoch: int) -> torch.Tensor:
+        module = _module(steve_play, steve_embeddings, seed=seed)
+        return torch.cat([b["goal_step"] for b in _batches(module, epoch)])
+
+    assert torch.equal(goal_steps(0, 0), goal_steps(0, 0))
+    assert not torch.equal(goal_steps(0, 0), goal_steps(0, 1))
+    assert not torch.equal(goal_steps(0, 0), goal_steps(1, 0))
+
+
+def test_noop_filter_drops_goals_with_their_steps(steve_play: Path, steve_embeddings: Path) -> None:
+    module = _module(steve_play, steve_embeddings, noop_filter=True, min_noop_run=5)
+    for batch in _batches(module):
+        assert batch["goal"].shape[:2] == batch["actions"].shape
+        assert (batch["goal_step"] >= batch["step"]).all()
+
+
+def test_embeddings_of_other_data_are_refused(steve_embeddings: Path, tmp_path: Path) -> None:
+    other = tmp_path / "other"
+    assert main(["data", "generate", "--expert", "random", "--env", "crafter", "--episodes", "1",
+                 "--max-steps", "20", "--seed", "3", "--out", str(other), "--no-progress"]) == 0
+    module = _module(other, steve_embeddings)
+    with pytest.raises(ValueError, match="rerun zoo data embed|lists"):
+        _batches(module)
+
+
+def test_partial_embeddings_train_on_the_embedded_shards_only(
+    steve_play: Path, steve_cclip: Path, tmp_path: Path
+) -> None:
+    assert main(["data", "embed", "--checkpoint", str(steve_cclip), "--src", str(steve_play),
+                 "--out", str(tmp_path), "--shards", "0:1", "--no-progress"]) == 0
+    with pytest.raises(ValueError, match="partial_embeddings=true"):
+        _batches(_module(steve_play, tmp_path))
+    with pytest.warns(UserWarning, match="the 1 of 2 CrafterPlay shards"):
+        batches = _batches(_module(steve_play, tmp_path, partial_embeddings=True))
+    embedded = set(_all_goals(tmp_path))
+    assert {int(e) for b in batches for e in b["episode"].flatten()} <= embedded

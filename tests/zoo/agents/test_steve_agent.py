@@ -1,0 +1,96 @@
+"""C-Steve-1 as an agent: goals from text/caption/clip, seeded by the episode, CFG in play."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from zoo.agents.steve_agent import GoalEncoder, SteveAgent, StevePolicy
+from zoo.envs.base import Step
+from zoo.envs.schema import empty_state
+from zoo.models.cclip import CCLIPConfig, CCLIPModel
+from zoo.models.cvpt import CVPTConfig, CVPTModel
+from zoo.models.prior import CVAEPrior, PriorConfig
+from zoo.models.steve import SteveConfig, SteveModel
+
+
+@pytest.fixture(scope="module")
+def goals() -> GoalEncoder:
+    torch.manual_seed(0)
+    cclip = CCLIPModel(CCLIPConfig.from_name("smoke"))
+    prior = CVAEPrior(PriorConfig(embed_dim=64, hidden=32, latent_dim=8))
+    return GoalEncoder(cclip, prior)
+
+
+def _policy(cfg_scale: float = 1.5) -> StevePolicy:
+    torch.manual_seed(1)
+    backbone = CVPTModel(CVPTConfig.from_name(
+        "tiny", d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(2, 4, 4),
+        encoder_hidden=32, memory_len=4, input_downsample=4,
+    ))
+    model = SteveModel(backbone, SteveConfig(goal_dim=64, lora_rank=2))
+    with torch.no_grad():
+        for param in model.trainable_parameters().values():
+            param.normal_(0, 0.5)
+    return StevePolicy(model, cfg_scale=cfg_scale)
+
+
+def _step(n: int, seed: int = 0) -> Step:
+    frames = np.random.default_rng(seed).integers(0, 256, (n, 144, 144, 3), dtype=np.uint8)
+    return Step(frames, empty_state(n), np.zeros(n, np.float32), np.zeros(n, bool))
+
+
+def test_text_caption_and_clip_goals_have_the_goal_width(goals: GoalEncoder) -> None:
+    assert goals.from_text(["obtain wood", "go to sleep"]).shape == (2, 64)
+    torch.testing.assert_close(goals.from_caption_ids([0]), goals.from_text(["obtain wood"]))
+    clips = np.zeros((3, 6, 144, 144, 3), np.uint8)
+    assert goals.from_clips(clips).shape == (3, 64)
+    with pytest.raises(ValueError, match="caption ids \\[99\\]"):
+        goals.from_caption_ids([99])
+
+
+def test_a_goal_depends_on_the_episode_seed_and_the_text_alone(goals: GoalEncoder) -> None:
+    a = SteveAgent(_policy(), goals, 2)
+    a.reset(np.array([5, 6]))
+    a.instruct(["obtain wood", "obtain wood"])
+    b = SteveAgent(_policy(), goals, 2)
+    b.instruct(["obtain sapling", None])  # another history before the same episodes
+    b.reset(np.array([5, 6]))
+    b.instruct(["obtain wood", "obtain wood"])
+    torch.testing.assert_close(a._goal, b._goal)
+    assert not torch.equal(a._goal[0], a._goal[1]), "two episodes draw their own goals"
+    np.testing.assert_array_equal(a.act(_step(2)), b.act(_step(2)))
+
+
+def test_no_instruction_is_the_zero_goal_and_actions_are_valid(goals: GoalEncoder) -> None:
+    agent = SteveAgent(_policy(), goals, 3)
+    agent.reset(np.array([1, 2, 3]))
+    agent.instruct(["obtain wood", None, "place table on grass"])
+    assert torch.count_nonzero(agent._goal[1]) == 0
+    actions = agent.act(_step(3))
+    assert actions.shape == (3,) and actions.dtype == np.int32
+    assert ((0 <= actions) & (actions < 17)).all()
+
+
+def test_guidance_scale_zero_is_the_conditional_policy() -> None:
+    policy, unguided = _policy(cfg_scale=1.5), _policy(cfg_scale=0.0)
+    goal = torch.randn(2, 64)
+    frames = _step(2).frames
+    guided_logits, _ = policy.logits(frames, goal, policy.initial_state(2))
+    plain_logits, _ = unguided.logits(frames, goal, unguided.initial_state(2))
+    cond, _ = unguided.model(
+        torch.tensor(frames).unsqueeze(1), torch.zeros(2, 1, dtype=torch.bool), goal.unsqueeze(1),
+        unguided.model.initial_state(2),
+    )
+    torch.testing.assert_close(plain_logits, cond[:, 0])
+    assert not torch.allclose(guided_logits, plain_logits)
+
+
+def test_mismatched_goal_width_is_named(goals: GoalEncoder) -> None:
+    policy = _policy()
+    with pytest.raises(ValueError, match=r"goals must have shape \(2, 64\)"):
+        policy.logits(_step(2).frames, torch.zeros(2, 32), policy.initial_state(2))
+    small = GoalEncoder(CCLIPModel(CCLIPConfig.from_name("smoke", embed_dim=32)))
+    with pytest.raises(ValueError, match="goal_dim=64"):
+        SteveAgent(policy, small, 1)

@@ -1,0 +1,119 @@
+"""C-Steve-1's network: starts as its C-VPT, trains only LoRA + conditioning, guidance is exact."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from zoo.models.cvpt import CVPTConfig, CVPTModel
+from zoo.models.steve import SteveConfig, SteveModel, combine_guidance
+
+GOAL_DIM = 8
+
+
+def _backbone(seed: int = 0) -> CVPTModel:
+    torch.manual_seed(seed)
+    config = CVPTConfig.from_name(
+        "tiny", d_model=32, d_ff=64, n_layers=2, n_heads=2, encoder_hidden=32,
+        impala_channels=(4, 8, 8), memory_len=8, input_downsample=4,
+    )
+    return CVPTModel(config).eval()
+
+
+def _inputs(batch: int = 2, steps: int = 5, seed: int = 1):
+    g = torch.Generator().manual_seed(seed)
+    frames = torch.randint(0, 256, (batch, steps, 144, 144, 3), dtype=torch.uint8, generator=g)
+    first = torch.zeros(batch, steps, dtype=torch.bool)
+    first[:, 0] = True
+    goal = torch.randn(batch, steps, GOAL_DIM, generator=g)
+    return frames, first, goal
+
+
+def _randomise_trainable(model: SteveModel) -> None:
+    with torch.no_grad():
+        for param in model.trainable_parameters().values():
+            param.normal_(0, 0.2)
+
+
+@pytest.mark.parametrize("conditioning", ["head", "trxl_input"])
+def test_untrained_steve_is_its_cvpt_whatever_the_goal(conditioning: str) -> None:
+    frames, first, goal = _inputs()
+    cvpt = _backbone()
+    expected, _ = cvpt(frames, first, cvpt.initial_state(2))
+    steve = SteveModel(_backbone(), SteveConfig(goal_dim=GOAL_DIM, conditioning=conditioning))
+    logits, _ = steve(frames, first, goal, steve.initial_state(2))
+    torch.testing.assert_close(logits, expected, rtol=1e-5, atol=1e-5)  # float rounding only
+
+
+def test_only_lora_and_conditioning_train() -> None:
+    steve = SteveModel(_backbone(), SteveConfig(goal_dim=GOAL_DIM, lora_rank=4))
+    trainable = steve.trainable_parameters()
+    assert trainable and all(n.startswith("condition.") or "lora_" in n for n in trainable)
+    # every TrXL linear layer named in lora_targets got an adapter: 5 per layer, A and B each
+    assert sum("lora_A" in n for n in trainable) == 5 * 2
+    frozen = {n: p.detach().clone() for n, p in steve.named_parameters() if not p.requires_grad}
+    assert any(n.startswith("backbone.encoder") for n in frozen)
+    assert any(n.startswith("backbone.policy_head") for n in frozen)
+
+    optimizer = torch.optim.AdamW(trainable.values(), lr=1e-2)
+    before = {n: p.detach().clone() for n, p in trainable.items()}
+    frames, first, goal = _inputs()
+    logits, _ = steve(frames, first, goal, steve.initial_state(2))
+    logits.logsumexp(-1).mean().backward()
+    assert all(p.grad is None for p in steve.parameters() if not p.requires_grad)
+    optimizer.step()
+    for name, param in steve.named_parameters():
+        if name in frozen:
+            assert torch.equal(param, frozen[name]), f"frozen {name} changed"
+    changed = [n for n, p in trainable.items() if not torch.equal(p, before[n])]
+    assert any(n.startswith("condition.") for n in changed) and any("lora_B" in n for n in changed)
+
+
+def test_goal_changes_the_policy_once_trained() -> None:
+    steve = SteveModel(_backbone(), SteveConfig(goal_dim=GOAL_DIM))
+    _randomise_trainable(steve)
+    frames, first, goal = _inputs()
+    a, _ = steve(frames, first, goal, steve.initial_state(2))
+    b, _ = steve(frames, first, -goal, steve.initial_state(2))
+    assert not torch.allclose(a, b)
+
+
+def test_combine_guidance_on_fixed_logits() -> None:
+    cond = torch.tensor([[2.0, 0.0, -1.0]])
+    uncond = torch.tensor([[1.0, 1.0, 1.0]])
+    # (1 + 1.5) * cond - 1.5 * uncond
+    expected = torch.tensor([[3.5, -1.5, -4.0]])
+    torch.testing.assert_close(combine_guidance(cond, uncond, 1.5), expected)
+    torch.testing.assert_close(combine_guidance(cond, uncond, 0.0), cond)
+
+
+@pytest.mark.parametrize("conditioning", ["head", "trxl_input"])
+def test_guided_steps_equal_separate_conditional_and_unconditional_passes(conditioning: str) -> None:
+    """Step by step with cached memory, one batched forward = two full-history passes."""
+    steve = SteveModel(_backbone(), SteveConfig(goal_dim=GOAL_DIM, conditioning=conditioning))
+    _randomise_trainable(steve)
+    frames, first, goal = _inputs(steps=6)
+    scale = 1.5
+    with torch.no_grad():
+        cond, _ = steve(frames, first, goal, steve.initial_state(2))
+        uncond, _ = steve(frames, first, torch.zeros_like(goal), steve.initial_state(2))
+        state = steve.guidance_state(2)
+        guided = []
+        for t in range(frames.shape[1]):
+            step = slice(t, t + 1)
+            logits, state = steve.guided_logits(
+                frames[:, step], first[:, step], goal[:, step], state, scale
+            )
+            guided.append(logits)
+    torch.testing.assert_close(
+        torch.cat(guided, 1), combine_guidance(cond, uncond, scale), rtol=1e-4, atol=1e-4
+    )
+
+
+def test_bad_goal_shape_and_config_are_named() -> None:
+    steve = SteveModel(_backbone(), SteveConfig(goal_dim=GOAL_DIM))
+    frames, first, goal = _inputs()
+    with pytest.raises(ValueError, match=r"goal must have shape \(2, 5, 8\)"):
+        steve(frames, first, goal[..., :4], steve.initial_state(2))
+    with pytest.raises(ValueError, match="conditioning='resnet'"):
+        SteveConfig(conditioning="resnet")  # type: ignore[arg-type]

@@ -1,0 +1,257 @@
+"""Instructions in, actions out: C-Steve-1 with goals from text, captions or clips, and CFG.
+
+- ``load_steve_checkpoint``: the network of a ``zoo fit --config configs/csteve1*.yaml`` run,
+  without Lightning (its hyper-parameters hold the backbone's architecture).
+- ``GoalEncoder``: a goal embedding from a text instruction (C-CLIP text tower, then the CVAE
+  prior, paper §4.3 "Inference"), from a caption id (its caption text, the same way), or from a
+  6-frame video clip (C-CLIP video tower, what training used).
+- ``StevePolicy``: ``initial_state(n)`` and ``act(frames, goals, state)``, one frame per env per
+  call with cached TrXL memory, classifier-free guidance with scale ``cfg_scale`` (paper: 1.5).
+- ``SteveAgent``: an ``InstructableAgent`` for ``zoo eval``/``zoo play`` (``instruct`` sets an
+  env's instruction; it persists across episodes until changed; None plays without a goal).
+"""
+
+from __future__ import annotations
+
+import zlib
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.nn import functional as F
+
+from zoo.agents.cvpt_agent import sample_actions
+from zoo.cclip_demo import load_cclip_checkpoint
+from zoo.envs.base import Step
+from zoo.models.cclip import CCLIPModel
+from zoo.models.cvpt import CVPTConfig, CVPTModel
+from zoo.models.prior import CVAEPrior, load_prior
+from zoo.models.steve import SteveConfig, SteveModel
+from zoo.models.trxl import TrXLState
+
+MODEL_PREFIX = "model."
+
+
+def read_checkpoint(path: str | Path) -> dict:
+    """A Lightning checkpoint's dict (``weights_only``), with an error naming a bad path."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"checkpoint {path} does not exist")
+    return torch.load(path, map_location="cpu", weights_only=True)
+
+
+def is_steve_checkpoint(checkpoint: dict) -> bool:
+    return "backbone_config" in checkpoint.get("hyper_parameters", {})
+
+
+def load_steve_checkpoint(path: str | Path) -> SteveModel:
+    """The C-Steve-1 network of a Lightning checkpoint, in eval mode."""
+    checkpoint = read_checkpoint(path)
+    if not is_steve_checkpoint(checkpoint):
+        raise ValueError(f"{path} is not a C-Steve-1 checkpoint (its hyper-parameters lack backbone_config)")
+    hparams = checkpoint["hyper_parameters"]
+    backbone = CVPTModel(CVPTConfig.from_dict(hparams["backbone_config"]))
+    model = SteveModel(backbone, SteveConfig.from_hparams(hparams))
+    weights = {
+        key.removeprefix(MODEL_PREFIX): value
+        for key, value in checkpoint["state_dict"].items()
+        if key.startswith(MODEL_PREFIX)
+    }
+    model.load_state_dict(weights)
+    return model.eval()
+
+
+class GoalEncoder:
+    """Goal embeddings for C-Steve-1 from text, caption ids or video clips.
+
+    Text goals go through the prior; ``sample_prior`` draws c ~ N(0, I) (seeded per call),
+    otherwise the prior's mean goal (c = 0) is used. The prior's output is scaled to unit norm,
+    like the video embeddings C-Steve-1 was trained on (the CPU prior's come out at ~0.88).
+    """
+
+    def __init__(
+        self, cclip: CCLIPModel, prior: CVAEPrior | None = None, sample_prior: bool = True
+    ) -> None:
+        self.cclip = cclip.eval()
+        self.prior = prior.eval() if prior is not None else None
+        self.sample_prior = sample_prior
+
+    @classmethod
+    def load(cls, cclip: str | Path, prior: str | Path | None = None, **kwargs) -> GoalEncoder:
+        """From a C-CLIP checkpoint and (for text goals) a prior checkpoint."""
+        return cls(load_cclip_checkpoint(cclip), load_prior(prior) if prior else None, **kwargs)
+
+    @property
+    def goal_dim(self) -> int:
+        return self.cclip.config.embed_dim
+
+    @torch.no_grad()
+    def from_text(self, texts: list[str], seed: int = 0) -> torch.Tensor:
+        """(N, D) goals for N instructions (C-CLIP text embedding -> prior)."""
+        if self.prior is None:
+            raise ValueError("text instructions need the CVAE prior: pass a prior checkpoint (--prior)")
+        z_t = self.cclip.encode_text(list(texts))
+        generator = torch.Generator(device=z_t.device).manual_seed(seed)
+        goal = self.prior.sample(z_t, generator=generator, mean=not self.sample_prior)
+        return F.normalize(goal, dim=-1)  # training goals are unit-norm C-CLIP video embeddings
+
+    def from_caption_ids(self, caption_ids: list[int], seed: int = 0) -> torch.Tensor:
+        """(N, D) goals for CrafterCaption caption ids (0..60), through their caption text."""
+        from zoo.captions.vocabulary import load_vocabulary
+
+        texts = load_vocabulary().texts()
+        bad = [i for i in caption_ids if not 0 <= i < len(texts)]
+        if bad:
+            raise ValueError(f"caption ids {bad} out of range: expected 0..{len(texts) - 1}")
+        return self.from_text([texts[i] for i in caption_ids], seed)
+
+    @torch.no_grad()
+    def from_clips(self, frames: np.ndarray | torch.Tensor) -> torch.Tensor:
+        """(N, D) goals for N clips of 6 frames (N, 6, 144, 144, 3) uint8 (no prior needed)."""
+        return self.cclip.encode_video(frames)
+
+
+class StevePolicy:
+    """Steps N envs one frame at a time towards per-env goals, with classifier-free guidance."""
+
+    def __init__(
+        self,
+        model: SteveModel,
+        device: str | torch.device = "cpu",
+        cfg_scale: float = 1.5,
+        temperature: float = 1.0,
+        greedy: bool = False,
+        seed: int = 0,
+    ) -> None:
+        if temperature <= 0:
+            raise ValueError(f"temperature must be > 0, got {temperature}")
+        if cfg_scale < 0:
+            raise ValueError(f"cfg_scale must be >= 0, got {cfg_scale}")
+        self.device = torch.device(device)
+        self.model = model.to(self.device).eval()
+        self.cfg_scale = cfg_scale
+        self.temperature = temperature
+        self.greedy = greedy
+        self._rng = np.random.default_rng(seed)
+
+    @classmethod
+    def load(cls, path: str | Path, device: str = "cpu", **kwargs) -> StevePolicy:
+        return cls(load_steve_checkpoint(path), device, **kwargs)
+
+    @property
+    def goal_dim(self) -> int:
+        return self.model.config.goal_dim
+
+    def initial_state(self, n: int) -> TrXLState:
+        """Empty memory for n envs (both guidance passes)."""
+        return self.model.guidance_state(n, self.device)
+
+    @torch.no_grad()
+    def logits(
+        self,
+        frames: np.ndarray,
+        goals: torch.Tensor,
+        state: TrXLState,
+        first: np.ndarray | None = None,
+    ) -> tuple[torch.Tensor, TrXLState]:
+        """Guided logits (N, A) for frames (N, 144, 144, 3) uint8 and goals (N, D)."""
+        frames_t = torch.tensor(np.asarray(frames), device=self.device).unsqueeze(1)
+        n = frames_t.shape[0]
+        if first is None:
+            first = np.zeros(n, dtype=bool)
+        first_t = torch.as_tensor(np.asarray(first, dtype=bool), device=self.device).unsqueeze(1)
+        goals = torch.as_tensor(goals, device=self.device, dtype=torch.float32)
+        if goals.shape != (n, self.goal_dim):
+            raise ValueError(f"goals must have shape ({n}, {self.goal_dim}), got {tuple(goals.shape)}")
+        logits, state = self.model.guided_logits(
+            frames_t, first_t, goals.unsqueeze(1), state, self.cfg_scale
+        )
+        return logits[:, 0].float(), state
+
+    def act(
+        self,
+        frames: np.ndarray,
+        goals: torch.Tensor,
+        state: TrXLState,
+        first: np.ndarray | None = None,
+        uniforms: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, TrXLState]:
+        """One action per env: ``actions, state = act(frames, goals, state)``."""
+        logits, state = self.logits(frames, goals, state, first)
+        u = self._rng.random(len(logits)) if uniforms is None else np.asarray(uniforms)
+        return sample_actions(logits, self.temperature, self.greedy, u), state
+
+
+class SteveAgent:
+    """``InstructableAgent`` for N envs: C-Steve-1 following each env's current instruction."""
+
+    name = "csteve1"
+    needs_pixels = True
+
+    def __init__(self, policy: StevePolicy, goals: GoalEncoder | None, num_envs: int) -> None:
+        if goals is not None and goals.goal_dim != policy.goal_dim:
+            raise ValueError(
+                f"the C-CLIP embeds {goals.goal_dim} dimensions but C-Steve-1 expects "
+                f"goal_dim={policy.goal_dim}: use the C-CLIP it was trained with"
+            )
+        self.policy = policy
+        self.goals = goals
+        self.num_envs = num_envs
+        self._state = policy.initial_state(num_envs)
+        self._first = np.ones(num_envs, dtype=bool)
+        self._seeds = np.zeros(num_envs, dtype=np.int64)
+        self._rngs = [np.random.default_rng(0) for _ in range(num_envs)]
+        self._goal = torch.zeros(num_envs, policy.goal_dim)
+        self.instructions: list[str | None] = [None] * num_envs
+
+    def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> None:
+        """New episodes where ``mask``: fresh memory, and the current instruction's goal is
+        drawn again from the new episode seed."""
+        for i in range(self.num_envs) if mask is None else np.flatnonzero(mask):
+            self._seeds[i] = int(seeds[i])
+            self._rngs[i] = np.random.default_rng(int(seeds[i]))
+            self._first[i] = True
+            self._draw_goal(i)
+
+    def instruct(self, instructions: list[str | None], mask: np.ndarray | None = None) -> None:
+        """Give env i ``instructions[i]`` where ``mask[i]`` (all if None); None: no goal.
+
+        The goal is drawn from the prior once per instruction and episode, seeded by the
+        episode seed and the text, so an episode's goals depend on its seed alone.
+        """
+        if len(instructions) != self.num_envs:
+            raise ValueError(f"{len(instructions)} instructions for {self.num_envs} envs")
+        for i in range(self.num_envs) if mask is None else np.flatnonzero(mask):
+            if instructions[i] != self.instructions[i]:
+                self.instructions[i] = instructions[i]
+                self._draw_goal(i)
+
+    def _draw_goal(self, i: int) -> None:
+        text = self.instructions[i]
+        if text is None:
+            self._goal[i] = 0
+            return
+        if self.goals is None:
+            raise ValueError("SteveAgent was built without a GoalEncoder: it cannot read text")
+        seed = int(self._seeds[i]) ^ zlib.crc32(text.encode())
+        self._goal[i] = self.goals.from_text([text], seed=seed)[0]
+
+    def act(self, step: Step) -> np.ndarray:
+        if step.frames is None:
+            raise ValueError("SteveAgent plays from pixels: make the env with pixels=True")
+        uniforms = np.array([rng.random() for rng in self._rngs])
+        actions, self._state = self.policy.act(
+            step.frames, self._goal, self._state, self._first, uniforms
+        )
+        self._first[:] = False
+        return actions.astype(np.int32)
+
+
+__all__ = [
+    "GoalEncoder",
+    "SteveAgent",
+    "StevePolicy",
+    "is_steve_checkpoint",
+    "load_steve_checkpoint",
+    "read_checkpoint",
+]

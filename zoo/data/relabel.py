@@ -1,0 +1,129 @@
+"""Packed hindsight relabelling for C-Steve-1: which later step's clip is each step's goal.
+
+STEVE-1's packed relabelling cuts an episode into pieces of a random length in
+[min_gap, max_gap]; every step of a piece is given the C-CLIP embedding of the clip at the
+piece's last step as its goal, so the policy learns to act towards what the expert did reach a
+few steps later. In Crafter distinct events follow each other within a few steps (place table,
+craft wood pickaxe, craft wood sword in 3 steps), so a piece of random length often ends after
+the next event and its goal shows a later one. The paper's event-based variant ("Dataset
+Generation", §4.3) samples goals inside event segments: maximal runs of consecutive steps with
+the same CrafterCaption caption.
+
+Our reading of it, step by step, from the first step t of a piece:
+1. the window of goal steps is [t + min_gap - 1, t + max_gap - 1], cut at the episode's end
+   (so a goal is 1..max_gap steps ahead, counting the step itself);
+2. ``event``: the first event segment that reaches into the window is the goal's segment, and
+   the goal is drawn uniformly from its steps inside the window. A segment after the window
+   is never used (it would break the gap); a window without any caption falls back to step 3;
+3. ``plain`` (and the fallback): the goal is drawn uniformly from the window (STEVE-1);
+4. every step t..g gets goal g; with probability ``uncond_prob`` the whole piece is
+   unconditional instead (classifier-free guidance needs the policy without a goal); the next
+   piece starts at g + 1.
+Taking the *first* segment in the window is what keeps one goal from spanning two events: the
+steps before "place table" are labelled with the table, not with the pickaxe made just after.
+
+Step t's goal clip is o_{g-4..g+1} (``zoo data embed``), which holds the outcome of action g.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+RelabelMode = Literal["event", "plain"]
+RELABEL_MODES: tuple[str, ...] = ("event", "plain")
+NO_CAPTION = -1
+
+
+@dataclass(frozen=True)
+class RelabelParams:
+    """The paper's C-Steve-1 table: min/max steps between goals 1/10, unconditional 0.1."""
+
+    mode: RelabelMode = "event"
+    """``event``: goals inside caption segments (the paper's); ``plain``: STEVE-1's packing."""
+    min_gap: int = 1
+    """Fewest steps a goal is ahead of the first step that gets it (the step itself counts)."""
+    max_gap: int = 10
+    """Most steps a goal is ahead of the first step that gets it."""
+    uncond_prob: float = 0.1
+    """Share of pieces trained without a goal (classifier-free guidance)."""
+
+    def __post_init__(self) -> None:
+        if self.mode not in RELABEL_MODES:
+            raise ValueError(f"relabel mode {self.mode!r}: expected one of {RELABEL_MODES}")
+        if not 1 <= self.min_gap <= self.max_gap:
+            raise ValueError(
+                f"min_gap={self.min_gap} and max_gap={self.max_gap}: need 1 <= min_gap <= max_gap"
+            )
+        if not 0.0 <= self.uncond_prob <= 1.0:
+            raise ValueError(f"uncond_prob={self.uncond_prob} must lie in [0, 1]")
+
+
+@dataclass
+class Relabelling:
+    """Per step of one episode: its goal step, whether it has a goal, whether the goal is an event."""
+
+    goal_step: np.ndarray  # (T,) int64, goal_step[t] >= t
+    conditioned: np.ndarray  # (T,) bool, False on unconditional pieces
+    from_event: np.ndarray  # (T,) bool, the goal was drawn inside an event segment
+
+
+def _segment_in_window(captions: np.ndarray, lo: int, hi: int) -> tuple[int, int] | None:
+    """First and last step (inclusive) of the first event segment's part inside [lo, hi]."""
+    events = np.flatnonzero(captions[lo : hi + 1] != NO_CAPTION)
+    if len(events) == 0:
+        return None
+    start = lo + int(events[0])
+    caption = captions[start]
+    end = start
+    while end < hi and captions[end + 1] == caption:
+        end += 1
+    return start, end
+
+
+def relabel_episode(
+    captions: np.ndarray, params: RelabelParams, rng: np.random.Generator
+) -> Relabelling:
+    """Goals for every step of one episode from its per-step captions (-1: no caption).
+
+    The result depends only on ``captions``, ``params`` and ``rng``: one episode's goals never
+    point into another episode.
+    """
+    captions = np.asarray(captions)
+    if captions.ndim != 1:
+        raise ValueError(f"captions must be one episode's (T,) caption ids, got {captions.shape}")
+    length = len(captions)
+    goal_step = np.empty(length, np.int64)
+    conditioned = np.empty(length, bool)
+    from_event = np.zeros(length, bool)
+    t = 0
+    while t < length:
+        lo = min(t + params.min_gap - 1, length - 1)
+        hi = min(t + params.max_gap - 1, length - 1)
+        segment = _segment_in_window(captions, lo, hi) if params.mode == "event" else None
+        start, end = segment if segment is not None else (lo, hi)
+        goal = int(rng.integers(start, end + 1))
+        goal_step[t : goal + 1] = goal
+        conditioned[t : goal + 1] = rng.random() >= params.uncond_prob
+        from_event[t : goal + 1] = segment is not None
+        t = goal + 1
+    return Relabelling(goal_step, conditioned, from_event)
+
+
+def episode_rng(seed: int, epoch: int, episode: int) -> np.random.Generator:
+    """The relabelling stream of one episode in one epoch: new goals every epoch, the same in
+    any worker, rank or order the episode is read in."""
+    return np.random.default_rng([seed, epoch, episode, 0x5EE7E])
+
+
+__all__ = [
+    "NO_CAPTION",
+    "RELABEL_MODES",
+    "RelabelMode",
+    "RelabelParams",
+    "Relabelling",
+    "episode_rng",
+    "relabel_episode",
+]

@@ -1,0 +1,164 @@
+"""C-Steve-1: C-VPT conditioned on a C-CLIP goal embedding (paper §4.3, "Model Architecture").
+
+Head conditioning (the paper's choice, from MrSteve): the goal enters after the Transformer-XL,
+x'_t = x_t + W z_t + b, and the policy head reads x'. TrXL-input conditioning (STEVE-1's; the
+paper's conditioning ablation) adds W z_t + b to the image features before the Transformer-XL
+instead. W and b start at zero and LoRA's B matrices start at zero, so before training
+C-Steve-1 is exactly the C-VPT it was built from, whatever the goal.
+
+Fine-tuning is LoRA on the Transformer-XL's linear layers (``peft``), plus the conditioning
+layer; the image encoder, the TrXL's base weights, norms and the policy head stay frozen
+(``trainable_parameters`` names what trains).
+
+Classifier-free guidance needs the policy without a goal: that is goal = 0 (training drops the
+goal of 10% of pieces to zeros), i.e. x' = x + b. With head conditioning the Transformer-XL
+never sees the goal, so the conditional and unconditional passes share one TrXL pass and one
+memory, and guidance costs a second policy head only; with TrXL-input conditioning both passes
+run the TrXL, batched together, each with its own memory (``guided_logits``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Literal
+
+import torch
+from peft import LoraConfig, inject_adapter_in_model
+from torch import nn
+
+from zoo.models.cvpt import CVPTModel
+from zoo.models.trxl import TrXLState
+
+Conditioning = Literal["head", "trxl_input"]
+CONDITIONINGS: tuple[str, ...] = ("head", "trxl_input")
+
+
+@dataclass
+class SteveConfig:
+    """What C-Steve-1 adds to its C-VPT backbone."""
+
+    goal_dim: int = 512
+    """Width of the goal embedding (the C-CLIP embedding size)."""
+    conditioning: Conditioning = "head"
+    """``head``: after the Transformer-XL (the paper's); ``trxl_input``: before it (STEVE-1's)."""
+    lora_rank: int = 16
+    """Rank of the LoRA updates on the Transformer-XL (0: no LoRA, conditioning only)."""
+    lora_alpha: float = 16.0
+    """LoRA scale numerator (updates are scaled by alpha / rank)."""
+    lora_dropout: float = 0.0
+    """Dropout on the LoRA branch's input."""
+    lora_targets: list[str] = field(
+        default_factory=lambda: ["query", "key_value", "out", "ff.0", "ff.3"]
+    )
+    """Names (suffixes) of the TrXL linear layers that get LoRA: attention query, key/value,
+    output, and both feed-forward layers."""
+
+    def __post_init__(self) -> None:
+        if self.conditioning not in CONDITIONINGS:
+            raise ValueError(
+                f"conditioning={self.conditioning!r}: expected one of {CONDITIONINGS}"
+            )
+        if self.goal_dim < 1 or self.lora_rank < 0:
+            raise ValueError(
+                f"goal_dim={self.goal_dim} must be >= 1 and lora_rank={self.lora_rank} >= 0"
+            )
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_hparams(cls, hparams: dict) -> SteveConfig:
+        """The config of a C-Steve-1 training run from its hyper-parameters (None: default)."""
+        names = ("goal_dim", "conditioning", "lora_rank", "lora_alpha", "lora_dropout", "lora_targets")
+        values = {name: hparams[name] for name in names if hparams.get(name) is not None}
+        if "lora_targets" in values:
+            values["lora_targets"] = list(values["lora_targets"])
+        return cls(**values)
+
+
+class SteveModel(nn.Module):
+    """A C-VPT network with goal conditioning and LoRA; plain torch (played without Lightning)."""
+
+    def __init__(self, backbone: CVPTModel, config: SteveConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.backbone = backbone
+        self.cvpt_config = backbone.config
+        self.condition = nn.Linear(config.goal_dim, backbone.config.d_model)
+        nn.init.zeros_(self.condition.weight)
+        nn.init.zeros_(self.condition.bias)
+        if config.lora_rank > 0:
+            lora = LoraConfig(
+                r=config.lora_rank,
+                lora_alpha=config.lora_alpha,
+                lora_dropout=config.lora_dropout,
+                target_modules=list(config.lora_targets),
+            )
+            inject_adapter_in_model(lora, backbone.trxl)
+        for name, param in self.named_parameters():
+            param.requires_grad_(name.startswith("condition.") or "lora_" in name)
+
+    def trainable_parameters(self) -> dict[str, nn.Parameter]:
+        """The LoRA and conditioning parameters: all that fine-tuning changes."""
+        return {name: p for name, p in self.named_parameters() if p.requires_grad}
+
+    def initial_state(self, batch: int, device: torch.device | str | None = None) -> TrXLState:
+        return self.backbone.initial_state(batch, device)
+
+    def _goal_term(self, goal: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
+        expected = (*like.shape[:2], self.config.goal_dim)
+        if tuple(goal.shape) != expected:
+            raise ValueError(f"goal must have shape {expected} (batch, time, goal_dim), got {tuple(goal.shape)}")
+        return self.condition(goal.to(self.condition.weight.dtype)).to(like.dtype)
+
+    def forward(
+        self, frames: torch.Tensor, first: torch.Tensor, goal: torch.Tensor, state: TrXLState
+    ) -> tuple[torch.Tensor, TrXLState]:
+        """Action logits (B, T, A) given frames (B, T, S, S, 3) uint8, first (B, T) and goal
+        (B, T, goal_dim) (zeros: no goal), and the state after the segment."""
+        x = self.backbone.encode_frames(frames)
+        if self.config.conditioning == "trxl_input":
+            x = x + self._goal_term(goal, x)
+        hidden, state = self.backbone.trxl(x, first.bool(), state)
+        if self.config.conditioning == "head":
+            hidden = hidden + self._goal_term(goal, hidden)
+        return self.backbone.policy_head(hidden), state
+
+    def guided_logits(
+        self,
+        frames: torch.Tensor,
+        first: torch.Tensor,
+        goal: torch.Tensor,
+        state: TrXLState,
+        scale: float,
+    ) -> tuple[torch.Tensor, TrXLState]:
+        """Classifier-free guidance: (1 + scale) * cond - scale * uncond logits, one forward.
+
+        ``state`` is the TrXL state of the batch (B envs) for head conditioning, and of the
+        doubled batch (B conditional, then B unconditional rows) for TrXL-input conditioning:
+        ``guidance_state`` makes the right one.
+        """
+        uncond_goal = torch.zeros_like(goal)
+        if self.config.conditioning == "head":
+            hidden, state = self.backbone.trxl(self.backbone.encode_frames(frames), first.bool(), state)
+            both = torch.cat([hidden + self._goal_term(goal, hidden), hidden + self._goal_term(uncond_goal, hidden)])
+        else:
+            x = self.backbone.encode_frames(frames)
+            x = torch.cat([x + self._goal_term(goal, x), x + self._goal_term(uncond_goal, x)])
+            hidden, state = self.backbone.trxl(x, torch.cat([first, first]).bool(), state)
+            both = hidden
+        cond, uncond = self.backbone.policy_head(both).chunk(2)
+        return combine_guidance(cond, uncond, scale), state
+
+    def guidance_state(self, batch: int, device: torch.device | str | None = None) -> TrXLState:
+        """Empty TrXL memory for ``guided_logits`` on ``batch`` envs."""
+        rows = batch if self.config.conditioning == "head" else 2 * batch
+        return self.initial_state(rows, device)
+
+
+def combine_guidance(cond: torch.Tensor, uncond: torch.Tensor, scale: float) -> torch.Tensor:
+    """The paper's guided logits: (1 + scale) * cond - scale * uncond (scale 0: conditional)."""
+    return (1.0 + scale) * cond - scale * uncond
+
+
+__all__ = ["CONDITIONINGS", "Conditioning", "SteveConfig", "SteveModel", "combine_guidance"]
