@@ -62,6 +62,15 @@ def test_fit_then_play_an_instruction(
     assert len(log["actions"]) == 12 and isinstance(log["unlocked"], dict)
     assert (out / "play.gif").stat().st_size > 0
 
+    task_out = tmp_path / "task"
+    argv = ["eval", "--task", "make_wood_pickaxe", "--checkpoint", str(checkpoint),
+            "--instruction", "craft wood pickaxe", "--cclip", str(steve_cclip), "--prior",
+            str(tmp_path / "prior.ckpt"), "--env", "crafter", "--episodes", "2",
+            "--max-steps", "8", "--no-gif", "--out", str(task_out)]
+    assert main(argv) == 0
+    report = json.loads((task_out / "report.json").read_text())
+    assert report["episodes"] == 2 and 0 <= report["success_percent"] <= 100
+
 
 def test_goal_width_mismatch_is_named_before_training(
     steve_play: Path, steve_embeddings: Path, tmp_path: Path

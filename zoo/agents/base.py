@@ -25,6 +25,17 @@ class Agent(Protocol):
         ...
 
 
+class InstructableAgent(Agent, Protocol):
+    """An agent told what to do in words: C-Steve-1, the goal-directed scripted expert."""
+
+    def instruct(self, instructions: list[str | None], mask: np.ndarray | None = None) -> None:
+        """Set env i's instruction (a caption text; None: none) where ``mask[i]`` (all if None).
+
+        Raises ValueError naming the known instructions for a text the agent cannot follow.
+        """
+        ...
+
+
 class RandomAgent:
     """Uniform random actions; each env's stream depends only on its episode seed."""
 

@@ -47,6 +47,7 @@ class EnvPlanner(SurvivalGoals):
         self.explore_until = 0
         self.plant_guard: tuple[int, int] | None = None
         self.last_goal = ""  # which goal chose the last action (for traces and tests)
+        self.instruction: str | None = None  # a caption of INSTRUCTIONS; None: normal play
 
     # --- the priority list ---------------------------------------------------------------
     def act(self, v: View) -> int:
@@ -54,7 +55,39 @@ class EnvPlanner(SurvivalGoals):
         if v.sleeping:
             self.last_goal = "asleep"
             return int(Action.NOOP)  # both games ignore actions while the player sleeps
-        for goal in (
+        goals = self._normal_goals() if self.instruction is None else self._instructed_goals()
+        for goal in goals:
+            action = goal(v)
+            if action is not None:
+                self.last_goal = goal.__name__
+                return int(action)
+        self.last_goal = "random"
+        moves = [m for m in MOVES if v.is_free(v.neighbour(v.pos, m))]  # never into lava
+        return int(self.rng.choice(moves)) if moves else int(Action.NOOP)
+
+    def _instructed_goals(self) -> tuple:
+        """Goal-directed play: stay alive (threats, needs), then only the instruction.
+
+        No night shelter and no side goals: the instruction is the task, and a task's 1,000
+        steps are too few to spend a night in a pocket.
+        """
+        return (
+            self._arm,
+            self._flee_unarmed,
+            self._fight_adjacent,
+            self._dodge_arrows,
+            self._engage_zombie,
+            self._critical_needs,
+            self._urgent_needs,
+            self._instructed,
+            self._explore,
+        )
+
+    def _instructed(self, v: View) -> int | None:
+        return INSTRUCTIONS[self.instruction](self, v)
+
+    def _normal_goals(self) -> tuple:
+        return (
             self._arm,
             self._flee_unarmed,
             self._fight_adjacent,
@@ -71,14 +104,7 @@ class EnvPlanner(SurvivalGoals):
             self._tech_tree,
             self._late_goals,
             self._explore,
-        ):
-            action = goal(v)
-            if action is not None:
-                self.last_goal = goal.__name__
-                return int(action)
-        self.last_goal = "random"
-        moves = [m for m in MOVES if v.is_free(v.neighbour(v.pos, m))]  # never into lava
-        return int(self.rng.choice(moves)) if moves else int(Action.NOOP)
+        )
 
     # --- cheap achievements and top-ups ----------------------------------------------------
     def _side_goals(self, v: View) -> int | None:
@@ -341,3 +367,87 @@ def _box_count(mask: np.ndarray, radius: int) -> np.ndarray:
         + csum[0:rows, 0:cols]
     )
 
+
+
+# --- goal-directed play: one behaviour per instruction (a caption text) ----------------------
+def _tool_first(planner: EnvPlanner, v: View, tool: Item) -> int | None:
+    """Make ``tool`` when it is missing (a pickaxe before mining), else None."""
+    return None if v.has(tool) else planner._make(v, tool)
+
+
+def _mine(block: Block):
+    def goal(planner: EnvPlanner, v: View) -> int | None:
+        action = _tool_first(planner, v, Item.WOOD_PICKAXE)
+        if action is not None:
+            return action
+        target = planner._minable_stone(v) if block == Block.STONE else v.map == block
+        return act_on(v, target, int(Action.DO))
+
+    return goal
+
+
+def _collect_sapling(planner: EnvPlanner, v: View) -> int | None:
+    """Hit grass until a sapling drops (10% per hit in both games)."""
+    return face_free(v, (v.map == Block.GRASS) & (v.mobs == 0), int(Action.DO))
+
+
+def _place_plant(planner: EnvPlanner, v: View) -> int | None:
+    if not v.has(Item.SAPLING):
+        return _collect_sapling(planner, v)
+    return face_free(v, (v.map == Block.GRASS) & (v.mobs == 0), int(Action.PLACE_PLANT))
+
+
+def _eat_plant(planner: EnvPlanner, v: View) -> int | None:
+    """Eat a ripe plant; wait beside a growing one; plant one if there is none."""
+    action = act_on(v, v.map == Block.RIPE_PLANT, int(Action.DO))
+    if action is not None:
+        return action
+    if (v.map == Block.PLANT).any():
+        return act_on(v, v.map == Block.PLANT, int(Action.NOOP))
+    return _place_plant(planner, v)
+
+
+def _place(action: Action, item: Item, cost_of):
+    """Place (``action``) on grass, first fetching ``cost_of(cfg)`` of ``item`` (wood or stone)."""
+
+    def goal(planner: EnvPlanner, v: View) -> int | None:
+        if v.inv[item] < cost_of(planner.cfg):
+            fetch = _mine(Block.STONE) if item == Item.STONE else _obtain_wood
+            return fetch(planner, v)
+        return face_free(v, (v.map == Block.GRASS) & (v.mobs == 0), int(action))
+
+    return goal
+
+
+def _craft(tool: Item):
+    def goal(planner: EnvPlanner, v: View) -> int | None:
+        stone_needed = RECIPES[tool][2]
+        if stone_needed > v.inv[Item.STONE]:
+            action = _tool_first(planner, v, Item.WOOD_PICKAXE)
+            if action is not None:
+                return action
+        return planner._make(v, tool)
+
+    return goal
+
+
+def _obtain_wood(planner: EnvPlanner, v: View) -> int | None:
+    return act_on(v, v.map == Block.TREE, int(Action.DO))
+
+
+INSTRUCTIONS = {
+    "obtain wood": _obtain_wood,
+    "obtain stone": _mine(Block.STONE),
+    "obtain coal": _mine(Block.COAL),
+    "obtain sapling": _collect_sapling,
+    "obtain drink": lambda planner, v: planner._drink(v),
+    "obtain ripe plant": _eat_plant,
+    "place plant on grass": _place_plant,
+    "place table on grass": _place(Action.PLACE_TABLE, Item.WOOD, lambda c: c.table_wood),
+    "place stone on grass": _place(Action.PLACE_STONE, Item.STONE, lambda c: 1),
+    "craft wood pickaxe": _craft(Item.WOOD_PICKAXE),
+    "craft wood sword": _craft(Item.WOOD_SWORD),
+    "craft stone pickaxe": _craft(Item.STONE_PICKAXE),
+    "craft stone sword": _craft(Item.STONE_SWORD),
+}
+"""The captions the goal-directed expert follows, each mapped to its behaviour."""

@@ -8,7 +8,7 @@ import numpy as np
 
 from zoo.envs.base import Step
 from zoo.experts.scripted.config import ExpertConfig
-from zoo.experts.scripted.goals import EnvPlanner
+from zoo.experts.scripted.goals import INSTRUCTIONS, EnvPlanner
 from zoo.experts.scripted.world import PathCosts, View
 
 
@@ -16,7 +16,9 @@ class ScriptedExpert:
     """Plans every env's next action from ``step.state`` (map, mobs, inventory, vitals).
 
     Each env has its own planner and ``np.random.default_rng(seed)`` made in ``reset``, so an
-    episode depends only on its seed, never on the batch it runs in.
+    episode depends only on its seed, never on the batch it runs in. ``instruct`` turns an env
+    goal-directed (an InstructableAgent): it then pursues one caption (``INSTRUCTIONS``) and
+    only survives besides; ``reset`` returns the env to normal play.
 
     Args:
         num_envs: envs acted for.
@@ -52,6 +54,22 @@ class ScriptedExpert:
         mask = np.ones(self.num_envs, bool) if mask is None else np.asarray(mask, bool)
         for i in np.flatnonzero(mask):
             self._planners[i] = EnvPlanner(int(seeds[i]), self.config)
+
+    def instruct(self, instructions: list[str | None], mask: np.ndarray | None = None) -> None:
+        """Give env i the goal ``instructions[i]`` where ``mask[i]`` (None: normal play)."""
+        if len(instructions) != self.num_envs:
+            raise ValueError(
+                f"got {len(instructions)} instructions, expected {self.num_envs}: one per env"
+            )
+        unknown = sorted({t for t in instructions if t is not None and t not in INSTRUCTIONS})
+        if unknown:
+            raise ValueError(
+                f"the scripted expert cannot follow {unknown}; known instructions: "
+                f"{sorted(INSTRUCTIONS)}"
+            )
+        mask = np.ones(self.num_envs, bool) if mask is None else np.asarray(mask, bool)
+        for i in np.flatnonzero(mask):
+            self._planners[i].instruction = instructions[i]
 
     def act(self, step: Step) -> np.ndarray:
         """One action id per env, from ``step.state`` alone."""

@@ -1,0 +1,113 @@
+"""Task evaluation: the Wilson interval, the summary and report, and the goal-directed
+scripted expert solving the tasks (a task the privileged expert fails is a broken task)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from zoo.envs.tasks import LONG_HORIZON_TASKS, SINGLE_STEP_TASKS, TASKS, make_task_env
+from zoo.eval.tasks import (
+    TaskEpisode,
+    evaluate_task,
+    summarize_task,
+    wilson_interval,
+    write_task_report,
+)
+from zoo.experts.scripted import ScriptedExpert
+
+
+@pytest.mark.parametrize(
+    "successes, n, low, high",
+    [
+        # by hand: center = (p + z²/2n) / (1 + z²/n), half = z/(1 + z²/n) sqrt(p(1-p)/n + z²/4n²)
+        (0, 10, 0.0, 0.27753),  # upper = (z²/n) / (1 + z²/n) = 0.38416 / 1.38416
+        (10, 10, 0.72247, 1.0),
+        (5, 10, 0.23659, 0.76341),  # center 0.5, half 1.41602 * 0.186021
+        (18, 20, 0.69897, 0.97214),  # center 0.83555, half 1.64419 * 0.083073
+    ],
+)
+def test_wilson_interval_matches_hand_computed_values(successes, n, low, high):
+    got = wilson_interval(successes, n)
+    assert got == pytest.approx((low, high), abs=1e-4)
+
+
+def test_wilson_interval_rejects_impossible_counts():
+    for successes, n in ((1, 0), (-1, 5), (6, 5)):
+        with pytest.raises(ValueError, match="need 0 <= successes <= n and n >= 1"):
+            wilson_interval(successes, n)
+
+
+def _episode(i: int, steps: list[int | None]) -> TaskEpisode:
+    success = all(s is not None for s in steps)
+    return TaskEpisode(i, i, success, steps[-1] if success else None, steps, 100)
+
+
+def test_summary_and_report(tmp_path):
+    results = [_episode(0, [3, 10]), _episode(1, [5, None]), _episode(2, [4, 30])]
+    meta = {"task": "T2", "env": "crafter", "agent": "x", "instruction_mode": "m",
+            "instructions": list(TASKS["T2"].instructions)}
+    report = write_task_report(results, [], tmp_path, meta)
+    assert report["successes"] == 2 and report["success_percent"] == pytest.approx(200 / 3)
+    assert report["median_steps_to_success"] == 20.0
+    assert [s["completed_percent"] for s in report["subtasks"]] == pytest.approx([100, 200 / 3])
+    assert report["subtasks"][0]["median_step"] == 4.0
+    saved = json.loads((tmp_path / "report.json").read_text())
+    assert saved["episode_results"][1]["subtask_steps"] == [5, None]
+    table = (tmp_path / "report.md").read_text()
+    assert "| **task** | 66.7 |" in table and "| 2. place table on grass | 66.7 |" in table
+    with pytest.raises(ValueError, match="no task episodes"):
+        summarize_task([], [])
+
+
+def _expert_success(task: str, game: str, episodes: int, num_envs: int = 4) -> list[TaskEpisode]:
+    env = make_task_env(task, game, num_envs, pixels=False)
+    results, _ = evaluate_task(
+        ScriptedExpert(num_envs), env, episodes, seed=0, follow_subtasks=True, progress=False
+    )
+    return results
+
+
+@pytest.mark.parametrize("task", ["make_wood_pickaxe", "T2"])
+def test_goal_directed_expert_solves_tasks_quickly(task):
+    results = _expert_success(task, "crafter", episodes=4, num_envs=2)
+    assert [r.index for r in results] == [0, 1, 2, 3]
+    assert all(r.success for r in results)
+    for r in results:
+        assert r.steps_to_success == r.length == r.subtask_steps[-1]  # success ends the episode
+        assert r.subtask_steps == sorted(r.subtask_steps)
+
+
+def test_results_do_not_depend_on_the_batch_size():
+    one = _expert_success("T3", "crafter", episodes=3, num_envs=1)
+    three = _expert_success("T3", "crafter", episodes=3, num_envs=3)
+    assert one == three
+
+
+def test_instructions_need_an_instructable_agent():
+    from zoo.agents.base import RandomAgent
+
+    env = make_task_env("T2", "crafter", 1, pixels=False)
+    with pytest.raises(ValueError, match="agent 'random' does not follow instructions"):
+        evaluate_task(RandomAgent(1), env, 1, 0, instruction="obtain wood", progress=False)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("game", ["crafter", "craftax"])
+@pytest.mark.parametrize("task", SINGLE_STEP_TASKS + LONG_HORIZON_TASKS)
+def test_goal_directed_expert_solves_every_task(task, game):
+    results = _expert_success(task, game, episodes=20)
+    assert sum(r.success for r in results) >= 18, [r for r in results if not r.success]
+
+
+def test_expert_instruct_checks_its_arguments():
+    expert = ScriptedExpert(2)
+    with pytest.raises(ValueError, match=r"cannot follow \['dance'\]; known instructions: \["):
+        expert.instruct(["dance", None])
+    with pytest.raises(ValueError, match="got 1 instructions, expected 2"):
+        expert.instruct(["obtain wood"])
+    expert.instruct(["obtain wood", None], mask=[True, False])
+    assert [p.instruction for p in expert._planners] == ["obtain wood", None]
+    expert.reset([0, 1])  # a new episode plays normally until instructed again
+    assert [p.instruction for p in expert._planners] == [None, None]
