@@ -111,33 +111,43 @@ WOOD_PICKAXE = _sub(Achievement.MAKE_WOOD_PICKAXE, "craft wood pickaxe")
 COAL = _sub(Achievement.COLLECT_COAL, "obtain coal")
 STONE = _sub(Achievement.COLLECT_STONE, "obtain stone")
 
+SINGLE_STEP_LIMIT = 500  # the paper gives none; ~50x the goal-directed expert's slowest median
 _WOOD_TOOL = {Item.WOOD: 3}
 _STONE_TOOL = {Item.WOOD: 3, Item.STONE: 1, Item.WOOD_PICKAXE: 1}
 
 TASKS: dict[str, TaskSpec] = {
     t.name: t
     for t in (
-        TaskSpec("collect_sapling", (SAPLING,), description="collect a sapling"),
-        TaskSpec("collect_drink", (DRINK_SUB,), description="drink water"),
         TaskSpec(
-            "make_wood_pickaxe", (WOOD_PICKAXE,), _WOOD_TOOL, description="craft a wood pickaxe"
+            "collect_sapling", (SAPLING,), max_steps=SINGLE_STEP_LIMIT,
+            description="collect a sapling",
+        ),
+        TaskSpec(
+            "collect_drink", (DRINK_SUB,), max_steps=SINGLE_STEP_LIMIT, description="drink water"
+        ),
+        TaskSpec(
+            "make_wood_pickaxe", (WOOD_PICKAXE,), _WOOD_TOOL, max_steps=SINGLE_STEP_LIMIT,
+            description="craft a wood pickaxe",
         ),
         TaskSpec(
             "make_wood_sword",
             (_sub(Achievement.MAKE_WOOD_SWORD, "craft wood sword"),),
             _WOOD_TOOL,
+            max_steps=SINGLE_STEP_LIMIT,
             description="craft a wood sword",
         ),
         TaskSpec(
             "make_stone_pickaxe",
             (_sub(Achievement.MAKE_STONE_PICKAXE, "craft stone pickaxe"),),
             _STONE_TOOL,
+            max_steps=SINGLE_STEP_LIMIT,
             description="craft a stone pickaxe",
         ),
         TaskSpec(
             "make_stone_sword",
             (_sub(Achievement.MAKE_STONE_SWORD, "craft stone sword"),),
             _STONE_TOOL,
+            max_steps=SINGLE_STEP_LIMIT,
             description="craft a stone sword",
         ),
         TaskSpec(

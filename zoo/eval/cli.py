@@ -55,7 +55,7 @@ def register(subparsers) -> None:
     )
     p.add_argument(
         "--max-steps", type=positive_int,
-        help="episode step limit (default 10000; with --task the task's, 1000)",
+        help="episode step limit (default 10000; with --task the task's: 500 single-step, 1000 T1-T4)",
     )
     p.add_argument(
         "--temperature", type=float, default=1.0,
