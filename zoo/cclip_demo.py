@@ -16,28 +16,14 @@ import torch
 import zstandard
 
 from zoo.captions.vocabulary import load_vocabulary
-from zoo.models.cclip import CCLIPConfig, CCLIPModel
-
-MODEL_PREFIX = "model."
+from zoo.export import load_model
+from zoo.models.cclip import CCLIPModel
 
 
 def load_cclip_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> CCLIPModel:
-    """A C-CLIP model from a `zoo fit --config configs/cclip*.yaml` checkpoint, in eval mode."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"C-CLIP checkpoint {path} does not exist")
-    checkpoint = torch.load(path, map_location=map_location, weights_only=True)
-    missing = [key for key in ("hyper_parameters", "state_dict") if key not in checkpoint]
-    if missing:
-        raise ValueError(f"{path} is not a Lightning checkpoint of C-CLIP (lacks {missing})")
-    model = CCLIPModel(CCLIPConfig.from_hparams(checkpoint["hyper_parameters"]))
-    weights = {
-        key.removeprefix(MODEL_PREFIX): value
-        for key, value in checkpoint["state_dict"].items()
-        if key.startswith(MODEL_PREFIX)
-    }
-    model.load_state_dict(weights)
-    return model.to(map_location).eval()
+    """A C-CLIP model, in eval mode, from a `zoo fit --config configs/cclip*.yaml` checkpoint
+    or a `zoo export` folder of one (e.g. weights/cclip_cpu)."""
+    return load_model(path, "cclip").to(map_location)
 
 
 def load_clip(path: str | Path) -> np.ndarray:

@@ -1,7 +1,12 @@
-"""Trained C-VPT weights without Lightning: read .ckpt files, write/read export folders.
+"""Trained networks without Lightning: read .ckpt files, write/read export folders.
 
-An export folder holds ``model.safetensors``, ``config.json`` (a ``CVPTConfig``) and
-``sha256.txt`` (``sha256sum`` format, so ``sha256sum -c sha256.txt`` also checks it).
+An export folder holds ``model.safetensors``, ``config.json`` (the network's config plus
+``"kind"``: cvpt, cclip, prior or csteve1, and the stored ``"dtype"``) and ``sha256.txt``
+(``sha256sum`` format, so ``sha256sum -c sha256.txt`` also checks it). Every model uses this
+one format and one checksum routine; a ``ModelKind`` only says how a training run's
+hyper-parameters become a config and a config a network. A C-VPT export written before kinds
+existed has no ``"kind"`` and reads as cvpt. Weights may be stored as float16/bfloat16 to halve
+the bytes; loading always gives float32 modules.
 """
 
 from __future__ import annotations
@@ -9,18 +14,22 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import torch
 from safetensors.torch import load_file, save_file
+from torch import nn
 
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
 CHECKSUM_FILE = "sha256.txt"
-STATE_DICT_PREFIX = "model."  # lit_models.cvpt.CVPT keeps the network in ``self.model``
+STATE_DICT_PREFIX = "model."  # every lit_models module keeps its network in ``self.model``
+DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
+RESERVED_KEYS = ("kind", "dtype")  # config.json keys that are not config fields
 
 
 def config_from_hparams(hparams: dict[str, Any]) -> CVPTConfig:
@@ -34,31 +43,164 @@ def config_from_hparams(hparams: dict[str, Any]) -> CVPTConfig:
     return CVPTConfig.from_name(hparams["model"], **overrides)
 
 
-def _read_lightning_checkpoint(ckpt_path: str | Path) -> tuple[CVPTConfig, dict[str, torch.Tensor]]:
-    checkpoint = torch.load(ckpt_path, map_location="cpu", weights_only=True)
-    if "state_dict" not in checkpoint or "hyper_parameters" not in checkpoint:
-        raise ValueError(f"{ckpt_path}: not a Lightning checkpoint (no state_dict/hyper_parameters)")
-    config = config_from_hparams(checkpoint["hyper_parameters"])
+# Per-kind builders import their model lazily: open_clip and peft are slow to import and a
+# C-VPT agent needs neither.
+def _cclip_config(hparams: dict[str, Any]) -> dict[str, Any]:
+    from zoo.models.cclip import CCLIPConfig
+
+    return dataclasses.asdict(CCLIPConfig.from_hparams(hparams))
+
+
+def _cclip_build(config: dict[str, Any]) -> nn.Module:
+    from zoo.models.cclip import CCLIPConfig, CCLIPModel
+
+    return CCLIPModel(CCLIPConfig(**config))
+
+
+def _prior_config(hparams: dict[str, Any]) -> dict[str, Any]:
+    from zoo.models.prior import PriorConfig
+
+    return dataclasses.asdict(PriorConfig.from_hparams(hparams))
+
+
+def _prior_build(config: dict[str, Any]) -> nn.Module:
+    from zoo.models.prior import CVAEPrior, PriorConfig
+
+    return CVAEPrior(PriorConfig(**config))
+
+
+def _steve_config(hparams: dict[str, Any]) -> dict[str, Any]:
+    """C-Steve-1's hyper-parameter layout: the backbone's CVPTConfig dict + SteveConfig fields."""
+    from zoo.models.steve import SteveConfig
+
+    backbone = CVPTConfig.from_dict(hparams["backbone_config"]).to_dict()
+    return {"backbone_config": backbone, **SteveConfig.from_hparams(hparams).to_dict()}
+
+
+def _steve_build(config: dict[str, Any]) -> nn.Module:
+    from zoo.models.steve import SteveConfig, SteveModel
+
+    unknown = set(config) - {"backbone_config"} - {f.name for f in dataclasses.fields(SteveConfig)}
+    if unknown:
+        raise ValueError(f"unknown C-Steve-1 config fields {sorted(unknown)}")
+    backbone = CVPTModel(CVPTConfig.from_dict(config["backbone_config"]))
+    return SteveModel(backbone, SteveConfig.from_hparams(config))
+
+
+def _steve_config_of(model: nn.Module) -> dict[str, Any]:
+    return {"backbone_config": model.cvpt_config.to_dict(), **model.config.to_dict()}
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelKind:
+    """How one model's checkpoints become a plain network and its config.json."""
+
+    title: str
+    """Name in messages."""
+    lit_class: str
+    """The LightningModule whose checkpoints hold it (``_class_path`` of LightningCLI runs)."""
+    model_class: str
+    """The plain network's class, ``module.QualName``."""
+    marker: str
+    """A hyper-parameter only this model's runs have (checkpoints without ``_class_path``)."""
+    config_from_hparams: Callable[[dict[str, Any]], dict[str, Any]]
+    build: Callable[[dict[str, Any]], nn.Module]
+    config_of: Callable[[nn.Module], dict[str, Any]]
+
+
+KINDS: dict[str, ModelKind] = {
+    "cvpt": ModelKind(
+        "C-VPT", "lit_models.cvpt.CVPT", "zoo.models.cvpt.CVPTModel", "tbptt_len",
+        lambda hparams: config_from_hparams(hparams).to_dict(),
+        lambda config: CVPTModel(CVPTConfig.from_dict(config)),
+        lambda model: model.config.to_dict(),
+    ),
+    "cclip": ModelKind(
+        "C-CLIP", "lit_models.cclip.CCLIP", "zoo.models.cclip.CCLIPModel", "text_layers",
+        _cclip_config, _cclip_build, lambda model: dataclasses.asdict(model.config),
+    ),
+    "prior": ModelKind(
+        "CVAE prior", "lit_models.prior.CVAEPriorModule", "zoo.models.prior.CVAEPrior",
+        "latent_dim", _prior_config, _prior_build, lambda model: dataclasses.asdict(model.config),
+    ),
+    "csteve1": ModelKind(
+        "C-Steve-1", "lit_models.csteve1.CSteve1", "zoo.models.steve.SteveModel",
+        "backbone_config", _steve_config, _steve_build, _steve_config_of,
+    ),
+}
+
+
+def kind_of_hparams(hparams: dict[str, Any]) -> str | None:
+    """The kind a run's hyper-parameters belong to (None: cannot tell).
+
+    LightningCLI runs name their class; hand-made checkpoints are told apart by a field only
+    one model has, C-Steve-1 first since it also carries C-VPT's.
+    """
+    class_path = hparams.get("_class_path")
+    for name, kind in KINDS.items():
+        if class_path == kind.lit_class:
+            return name
+    for name in ("csteve1", "prior", "cclip", "cvpt"):
+        if KINDS[name].marker in hparams:
+            return name
+    return "cvpt" if class_path is None and "model" in hparams else None
+
+
+def read_lightning_checkpoint(
+    path: str | Path, kind: str | None = None
+) -> tuple[str, dict[str, Any], dict[str, torch.Tensor]]:
+    """(kind, config, network state dict) of a Lightning .ckpt, via ``weights_only`` torch.load.
+
+    ``kind`` is what the caller expects; a checkpoint of another model is an error naming both.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"checkpoint {path} does not exist")
+    checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+    missing = [key for key in ("hyper_parameters", "state_dict") if key not in checkpoint]
+    if missing:
+        raise ValueError(f"{path}: not a Lightning checkpoint (lacks {missing})")
+    hparams = dict(checkpoint["hyper_parameters"])
+    found = kind_of_hparams(hparams)
+    if kind is not None and found not in (None, kind):
+        raise ValueError(
+            f"{path} holds a {KINDS[found].title} checkpoint, expected {KINDS[kind].title} ({kind})"
+        )
+    kind = kind or found
+    if kind is None:
+        raise ValueError(
+            f"{path}: cannot tell which model its hyper-parameters {sorted(hparams)} belong to; "
+            f"expected one of {sorted(KINDS)}"
+        )
     state_dict = {
         key.removeprefix(STATE_DICT_PREFIX): value
         for key, value in checkpoint["state_dict"].items()
         if key.startswith(STATE_DICT_PREFIX)
     }
-    return config, state_dict
+    return kind, KINDS[kind].config_from_hparams(hparams), state_dict
 
 
-def _build(config: CVPTConfig, state_dict: dict[str, torch.Tensor]) -> CVPTModel:
-    model = CVPTModel(config)
-    model.load_state_dict(state_dict)
+def _build(kind: str, config: dict[str, Any], state_dict: dict[str, torch.Tensor]) -> nn.Module:
+    model = KINDS[kind].build(config)
+    model.load_state_dict({k: _as_float32(v) for k, v in state_dict.items()})
     return model.eval()
 
 
+def _as_float32(tensor: torch.Tensor) -> torch.Tensor:
+    return tensor.float() if tensor.is_floating_point() else tensor
+
+
+def load_checkpoint(path: str | Path, kind: str) -> nn.Module:
+    """The ``kind`` network of a Lightning .ckpt, in eval mode, without Lightning."""
+    return _build(*read_lightning_checkpoint(path, kind))
+
+
 def load_checkpoint_model(ckpt_path: str | Path) -> CVPTModel:
-    """Rebuild the network from a Lightning .ckpt (``weights_only`` torch.load, no Lightning)."""
-    return _build(*_read_lightning_checkpoint(ckpt_path))
+    """Rebuild the C-VPT network from a Lightning .ckpt."""
+    return load_checkpoint(ckpt_path, "cvpt")
 
 
-def _sha256(path: Path) -> str:
+def sha256(path: Path) -> str:
     digest = hashlib.sha256()
     with path.open("rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
@@ -66,42 +208,97 @@ def _sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
-def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> Path:
-    """Write the network of a Lightning checkpoint as safetensors + config + checksums."""
-    config, state_dict = _read_lightning_checkpoint(ckpt_path)
-    # _build fails here, not at load time, if weights and config disagree
-    return save_exported(_build(config, state_dict), out_dir)
+def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path, dtype: str = "float32") -> Path:
+    """Write the network of any model's Lightning checkpoint as an export folder."""
+    # building here makes weights and config that disagree fail now, not at load time
+    return save_exported(_build(*read_lightning_checkpoint(ckpt_path)), out_dir, dtype)
 
 
-def save_exported(model: CVPTModel, out_dir: str | Path) -> Path:
-    """Write a C-VPT network as safetensors + config + checksums (what ``load_exported`` reads)."""
+def _kind_of_model(model: nn.Module) -> str:
+    class_name = f"{type(model).__module__}.{type(model).__qualname__}"
+    for name, kind in KINDS.items():
+        if kind.model_class == class_name:
+            return name
+    raise TypeError(f"cannot export a {class_name}: expected one of "
+                    f"{[kind.model_class for kind in KINDS.values()]}")
+
+
+def save_exported(model: nn.Module, out_dir: str | Path, dtype: str = "float32") -> Path:
+    """Write a network as safetensors + config + checksums (what ``load_exported`` reads).
+
+    ``dtype`` (float32, float16, bfloat16) is how floating-point weights are stored.
+    """
+    if dtype not in DTYPES:
+        raise ValueError(f"dtype {dtype!r}: expected one of {sorted(DTYPES)}")
+    kind = _kind_of_model(model)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    state_dict = model.state_dict()
-    save_file({k: v.contiguous() for k, v in state_dict.items()}, out / WEIGHTS_FILE)
-    (out / CONFIG_FILE).write_text(json.dumps(model.config.to_dict(), indent=2) + "\n")
-    lines = [f"{_sha256(out / name)}  {name}\n" for name in (WEIGHTS_FILE, CONFIG_FILE)]
+    weights = {
+        key: (value.to(DTYPES[dtype]) if value.is_floating_point() else value).contiguous()
+        for key, value in model.state_dict().items()
+    }
+    save_file(weights, out / WEIGHTS_FILE)
+    config = {"kind": kind, "dtype": dtype, **KINDS[kind].config_of(model)}
+    (out / CONFIG_FILE).write_text(json.dumps(config, indent=2) + "\n")
+    lines = [f"{sha256(out / name)}  {name}\n" for name in (WEIGHTS_FILE, CONFIG_FILE)]
     (out / CHECKSUM_FILE).write_text("".join(lines))
     return out
 
 
-def load_exported(out_dir: str | Path) -> CVPTModel:
-    """Rebuild the network from an export folder after checking its sha256 sums."""
+def verify_export(out_dir: str | Path) -> None:
+    """Raise unless the folder has all three files and every sum in sha256.txt matches."""
     out = Path(out_dir)
-    checksum_path = out / CHECKSUM_FILE
-    if not checksum_path.is_file():
-        raise FileNotFoundError(f"{checksum_path} missing: {out} is not a `zoo export` folder")
-    for line in checksum_path.read_text().splitlines():
+    for name in (CHECKSUM_FILE, WEIGHTS_FILE, CONFIG_FILE):
+        if not (out / name).is_file():
+            raise FileNotFoundError(
+                f"{out / name} missing: {out} is not a `zoo export` folder "
+                f"(expected {WEIGHTS_FILE}, {CONFIG_FILE} and {CHECKSUM_FILE})"
+            )
+    listed = {}
+    for line in (out / CHECKSUM_FILE).read_text().splitlines():
         expected, name = line.split()
-        actual = _sha256(out / name)
+        listed[name] = expected
+        actual = sha256(out / name)
         if actual != expected:
             raise ValueError(
                 f"checksum mismatch for {out / name}: sha256.txt says {expected}, file has {actual}"
             )
-    config = CVPTConfig.from_dict(json.loads((out / CONFIG_FILE).read_text()))
-    return _build(config, load_file(out / WEIGHTS_FILE))
+    unlisted = [name for name in (WEIGHTS_FILE, CONFIG_FILE) if name not in listed]
+    if unlisted:
+        raise ValueError(f"{out / CHECKSUM_FILE} has no sum for {unlisted}")
+
+
+def exported_kind(out_dir: str | Path) -> str:
+    """The kind an export folder's config.json names (no "kind": a C-VPT export)."""
+    path = Path(out_dir) / CONFIG_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} missing: {out_dir} is not a `zoo export` folder")
+    kind = json.loads(path.read_text()).get("kind", "cvpt")
+    if kind not in KINDS:
+        raise ValueError(f"{path}: unknown kind {kind!r}, expected one of {sorted(KINDS)}")
+    return kind
+
+
+def load_exported(out_dir: str | Path, kind: str = "cvpt") -> nn.Module:
+    """The ``kind`` network of an export folder, float32 and in eval mode, after checking sums."""
+    out = Path(out_dir)
+    verify_export(out)
+    found = exported_kind(out)
+    if found != kind:
+        raise ValueError(
+            f"{out / CONFIG_FILE} says kind {found!r} ({KINDS[found].title}), "
+            f"expected {kind!r} ({KINDS[kind].title})"
+        )
+    config = {k: v for k, v in json.loads((out / CONFIG_FILE).read_text()).items()
+              if k not in RESERVED_KEYS}
+    return _build(kind, config, load_file(out / WEIGHTS_FILE))
+
+
+def load_model(path: str | Path, kind: str) -> nn.Module:
+    """The ``kind`` network at ``path``: a folder is an export, a file a Lightning checkpoint."""
+    return load_exported(path, kind) if Path(path).is_dir() else load_checkpoint(path, kind)
 
 
 def load_policy_model(path: str | Path) -> CVPTModel:
-    """A folder is an export, a file a Lightning checkpoint."""
-    return load_exported(path) if Path(path).is_dir() else load_checkpoint_model(path)
+    """A C-VPT export folder or Lightning checkpoint."""
+    return load_model(path, "cvpt")

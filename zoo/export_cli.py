@@ -1,25 +1,56 @@
-"""`zoo export CKPT OUT`: a Lightning C-VPT checkpoint to a Lightning-free export folder."""
+"""`zoo export --checkpoint CKPT --out DIR`: any model's Lightning checkpoint to an export folder.
+
+The kind (C-VPT, C-CLIP, CVAE prior, C-Steve-1) comes from the checkpoint's hyper-parameters.
+The older positional form `zoo export CKPT DIR` still works (docs and scripts use it).
+"""
 
 from __future__ import annotations
 
 import argparse
+import sys
+
+DTYPE_CHOICES = ("float32", "float16", "bfloat16")
 
 
 def _export(args: argparse.Namespace) -> int:
-    from zoo.export import export_checkpoint  # torch loads only when exporting
+    checkpoint, out = args.checkpoint, args.out
+    if args.paths:
+        if checkpoint or out or len(args.paths) != 2:
+            return _fail("give CKPT OUT positionally or as --checkpoint/--out, not both")
+        checkpoint, out = args.paths
+    if not (checkpoint and out):
+        return _fail("needs a checkpoint and an output folder: --checkpoint CKPT --out DIR")
 
-    out = export_checkpoint(args.checkpoint, args.out_dir)
-    print(f"exported {args.checkpoint} -> {out}")
+    from zoo.export import export_checkpoint, exported_kind  # torch loads only when exporting
+
+    try:
+        path = export_checkpoint(checkpoint, out, args.dtype)
+    except (FileNotFoundError, ValueError) as err:
+        return _fail(str(err))
+    print(f"exported {exported_kind(path)} {checkpoint} -> {path} ({args.dtype})")
     return 0
+
+
+def _fail(message: str) -> int:
+    print(f"zoo export: error: {message}", file=sys.stderr)
+    return 2
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "export",
-        help="write a C-VPT .ckpt as model.safetensors + config.json + sha256.txt",
-        description="Export a C-VPT Lightning checkpoint so it loads with plain torch "
-        "(zoo.export.load_exported, or `zoo eval --agent cvpt --checkpoint OUT`).",
+        help="write a .ckpt of any model as model.safetensors + config.json + sha256.txt",
+        description="Export a Lightning checkpoint of C-VPT, C-CLIP, the CVAE prior or "
+        "C-Steve-1 so it loads with plain torch (zoo.export.load_exported, the model's loader, "
+        "or `zoo eval --checkpoint OUT` for the agents).",
     )
-    parser.add_argument("checkpoint", help="Lightning .ckpt written by `zoo fit`")
-    parser.add_argument("out_dir", help="folder to write (created if missing)")
+    parser.add_argument("--checkpoint", help="Lightning .ckpt written by `zoo fit`")
+    parser.add_argument("--out", help="folder to write (created if missing)")
+    parser.add_argument(
+        "--dtype", choices=DTYPE_CHOICES, default="float32",
+        help="how weights are stored; loading always gives float32 (default: %(default)s)",
+    )
+    parser.add_argument(
+        "paths", nargs="*", metavar="CKPT OUT", help="the same two paths, positionally"
+    )
     parser.set_defaults(handler=_export)

@@ -38,7 +38,7 @@ def make_agent(
         kind = {
             "ppo": "a PPO expert checkpoint dir",
             "cvpt": "a C-VPT .ckpt or export dir",
-            "csteve1": "a C-Steve-1 .ckpt",
+            "csteve1": "a C-Steve-1 .ckpt or export dir",
         }[name]
         raise ValueError(f"agent {name!r} needs --checkpoint PATH ({kind})")
     if name == "ppo":
@@ -68,8 +68,9 @@ def make_agent(
 def checkpoint_kind(path: str | Path) -> str:
     """Which trained agent a checkpoint holds, from its layout alone.
 
-    A PPO run or checkpoint folder has ``meta.json`` files; a C-VPT export folder has
-    ``model.safetensors``; a Lightning ``.ckpt`` file is a C-Steve-1 run when its
+    A PPO run or checkpoint folder has ``meta.json`` files; a ``zoo export`` folder has
+    ``model.safetensors`` and names its kind in ``config.json`` (C-VPT or C-Steve-1 play; C-CLIP
+    and the prior do not); a Lightning ``.ckpt`` file is a C-Steve-1 run when its
     hyper-parameters name a backbone, otherwise a C-VPT run.
     """
     path = Path(path)
@@ -79,11 +80,19 @@ def checkpoint_kind(path: str | Path) -> str:
         return "csteve1" if is_steve_checkpoint(read_checkpoint(path)) else "cvpt"
     if path.is_dir():
         if (path / "model.safetensors").is_file():
-            return "cvpt"
+            from zoo.export import KINDS, exported_kind
+
+            kind = exported_kind(path)
+            if kind not in ("cvpt", "csteve1"):
+                raise ValueError(
+                    f"{path} is a {KINDS[kind].title} export, not an agent: expected a C-VPT "
+                    "or C-Steve-1 export"
+                )
+            return kind
         if (path / "meta.json").is_file() or any(path.glob("update_*/meta.json")):
             return "ppo"
     raise ValueError(
-        f"cannot tell what {path} holds: expected a C-VPT .ckpt, a `zoo export` folder "
+        f"cannot tell what {path} holds: expected a C-VPT/C-Steve-1 .ckpt, a `zoo export` folder "
         "(model.safetensors) or a PPO checkpoint/run folder (meta.json); pass --agent"
     )
 

@@ -23,13 +23,11 @@ from torch.nn import functional as F
 from zoo.agents.cvpt_agent import sample_actions
 from zoo.cclip_demo import load_cclip_checkpoint
 from zoo.envs.base import Step
+from zoo.export import load_model
 from zoo.models.cclip import CCLIPModel
-from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.models.prior import CVAEPrior, load_prior
-from zoo.models.steve import SteveConfig, SteveModel
+from zoo.models.steve import SteveModel
 from zoo.models.trxl import TrXLState
-
-MODEL_PREFIX = "model."
 
 
 def read_checkpoint(path: str | Path) -> dict:
@@ -45,20 +43,8 @@ def is_steve_checkpoint(checkpoint: dict) -> bool:
 
 
 def load_steve_checkpoint(path: str | Path) -> SteveModel:
-    """The C-Steve-1 network of a Lightning checkpoint, in eval mode."""
-    checkpoint = read_checkpoint(path)
-    if not is_steve_checkpoint(checkpoint):
-        raise ValueError(f"{path} is not a C-Steve-1 checkpoint (its hyper-parameters lack backbone_config)")
-    hparams = checkpoint["hyper_parameters"]
-    backbone = CVPTModel(CVPTConfig.from_dict(hparams["backbone_config"]))
-    model = SteveModel(backbone, SteveConfig.from_hparams(hparams))
-    weights = {
-        key.removeprefix(MODEL_PREFIX): value
-        for key, value in checkpoint["state_dict"].items()
-        if key.startswith(MODEL_PREFIX)
-    }
-    model.load_state_dict(weights)
-    return model.eval()
+    """The C-Steve-1 network, in eval mode, of a Lightning checkpoint or a `zoo export` folder."""
+    return load_model(path, "csteve1")
 
 
 class GoalEncoder:

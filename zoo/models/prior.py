@@ -27,8 +27,6 @@ from typing import Any
 import torch
 from torch import nn
 
-MODEL_PREFIX = "model."
-
 
 @dataclass(frozen=True)
 class PriorConfig:
@@ -136,23 +134,11 @@ class CVAEPrior(nn.Module):
 
 
 def load_prior(path: str | Path, map_location: str | torch.device = "cpu") -> CVAEPrior:
-    """The prior of a `zoo fit --config configs/prior*.yaml` checkpoint, in eval mode, without
-    Lightning: its hyper-parameters rebuild the config and its "model." weights are loaded."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"prior checkpoint {path} does not exist")
-    checkpoint = torch.load(path, map_location=map_location, weights_only=True)
-    missing = [key for key in ("hyper_parameters", "state_dict") if key not in checkpoint]
-    if missing:
-        raise ValueError(f"{path} is not a Lightning checkpoint of the CVAE prior (lacks {missing})")
-    model = CVAEPrior(PriorConfig.from_hparams(checkpoint["hyper_parameters"]))
-    weights = {
-        key.removeprefix(MODEL_PREFIX): value
-        for key, value in checkpoint["state_dict"].items()
-        if key.startswith(MODEL_PREFIX)
-    }
-    model.load_state_dict(weights)
-    return model.to(map_location).eval()
+    """The prior, in eval mode and without Lightning, from a `zoo fit --config
+    configs/prior*.yaml` checkpoint or a `zoo export` folder of one (e.g. weights/prior_cpu)."""
+    from zoo.export import load_model  # zoo.export builds this module's CVAEPrior
+
+    return load_model(path, "prior").to(map_location)
 
 
 __all__ = ["CVAEPrior", "PriorConfig", "gaussian_kl", "load_prior"]

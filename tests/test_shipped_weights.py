@@ -1,0 +1,43 @@
+"""Every folder in weights/ is a verified `zoo export` with a model card that its loader reads,
+and weights/ stays within the size budget (it is committed to git)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from zoo.agents.steve_agent import load_steve_checkpoint
+from zoo.cclip_demo import load_cclip_checkpoint
+from zoo.export import CHECKSUM_FILE, exported_kind, load_policy_model, verify_export
+from zoo.models.prior import load_prior
+
+WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
+BUDGET_BYTES = 60 * 1024 * 1024
+SHIPPED = sorted(p for p in WEIGHTS.iterdir() if p.is_dir())
+LOADERS = {  # the public loader of each kind, as weights/README.md documents them
+    "cvpt": load_policy_model,
+    "cclip": load_cclip_checkpoint,
+    "prior": load_prior,
+    "csteve1": load_steve_checkpoint,
+}
+
+
+def test_weights_folder_ships_models_within_budget() -> None:
+    assert {p.name for p in SHIPPED} >= {"cclip_cpu", "prior_cpu"}
+    total = sum(p.stat().st_size for p in WEIGHTS.rglob("*") if p.is_file())
+    assert total <= BUDGET_BYTES, f"weights/ holds {total / 2**20:.1f} MiB, budget 60 MiB"
+
+
+@pytest.mark.parametrize("folder", SHIPPED, ids=[p.name for p in SHIPPED])
+def test_shipped_folder_verifies_and_loads(folder: Path) -> None:
+    card = folder / "MODEL_CARD.md"
+    assert card.is_file() and card.read_text().startswith("# "), f"{card} missing or untitled"
+    verify_export(folder)  # every file in sha256.txt matches
+    listed = {line.split()[1] for line in (folder / CHECKSUM_FILE).read_text().splitlines()}
+    assert listed == {"model.safetensors", "config.json"}
+    model = LOADERS[exported_kind(folder)](folder)
+    assert not model.training
+    floats = {v.dtype for v in model.state_dict().values() if v.is_floating_point()}
+    assert floats == {torch.float32}  # half-precision files load as float32
