@@ -13,7 +13,9 @@ config reads no file (``zoo fit --print_config`` and config checks work anywhere
 
 from __future__ import annotations
 
-from lit_models.sequence_bc import SequenceBC
+import torch
+
+from lit_models.sequence_bc import IGNORE_ACTION, SequenceBC
 from zoo.export import load_policy_model
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.models.steve import Conditioning, SteveConfig, SteveModel
@@ -84,6 +86,22 @@ class CSteve1(SequenceBC):
         else:
             cvpt = CVPTModel(CVPTConfig.from_dict(self.hparams.backbone_config))
         self.model = SteveModel(cvpt, SteveConfig.from_hparams(dict(self.hparams)))
+
+    def validation_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> None:
+        """The usual val/loss, plus how much the goal helps: on the steps that have a goal,
+        the loss with it (val/loss_goal) and with it zeroed (val/loss_nogoal, the unconditional
+        policy CFG subtracts). An untrained C-Steve-1 has the two equal."""
+        super().validation_step(batch, batch_idx)
+        has_goal = batch["goal_mask"] & (batch["actions"] != IGNORE_ACTION)
+        if not has_goal.any():
+            return
+        actions = batch["actions"].masked_fill(~has_goal, IGNORE_ACTION)
+        frames, first, goal = batch["frames"], batch["first"], batch["goal"]
+        losses = {
+            "val/loss_goal": self._loss(self(frames, first, goal), actions),
+            "val/loss_nogoal": self._loss(self(frames, first, torch.zeros_like(goal)), actions),
+        }
+        self.log_dict(losses, batch_size=actions.shape[0], sync_dist=True)
 
     def on_fit_start(self) -> None:
         data_dim = getattr(self.trainer.datamodule, "goal_dim", None)

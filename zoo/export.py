@@ -12,7 +12,6 @@ the bytes; loading always gives float32 modules.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 from collections.abc import Callable
 from pathlib import Path
@@ -22,6 +21,7 @@ import torch
 from safetensors.torch import load_file, save_file
 from torch import nn
 
+from zoo.data.shards import sha256_file
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 
 WEIGHTS_FILE = "model.safetensors"
@@ -200,12 +200,11 @@ def load_checkpoint_model(ckpt_path: str | Path) -> CVPTModel:
     return load_checkpoint(ckpt_path, "cvpt")
 
 
-def sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with path.open("rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+def checkpoint_sha256(path: str | Path) -> str:
+    """Fingerprint of a model: a .ckpt's own sha256, an export folder's sha256.txt's (which
+    pins its weights and config), so data made from either records what made it."""
+    path = Path(path)
+    return sha256_file(path / CHECKSUM_FILE if path.is_dir() else path)
 
 
 def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path, dtype: str = "float32") -> Path:
@@ -240,7 +239,7 @@ def save_exported(model: nn.Module, out_dir: str | Path, dtype: str = "float32")
     save_file(weights, out / WEIGHTS_FILE)
     config = {"kind": kind, "dtype": dtype, **KINDS[kind].config_of(model)}
     (out / CONFIG_FILE).write_text(json.dumps(config, indent=2) + "\n")
-    lines = [f"{sha256(out / name)}  {name}\n" for name in (WEIGHTS_FILE, CONFIG_FILE)]
+    lines = [f"{sha256_file(out / name)}  {name}\n" for name in (WEIGHTS_FILE, CONFIG_FILE)]
     (out / CHECKSUM_FILE).write_text("".join(lines))
     return out
 
@@ -258,7 +257,7 @@ def verify_export(out_dir: str | Path) -> None:
     for line in (out / CHECKSUM_FILE).read_text().splitlines():
         expected, name = line.split()
         listed[name] = expected
-        actual = sha256(out / name)
+        actual = sha256_file(out / name)
         if actual != expected:
             raise ValueError(
                 f"checksum mismatch for {out / name}: sha256.txt says {expected}, file has {actual}"

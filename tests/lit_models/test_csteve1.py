@@ -34,7 +34,8 @@ def _goal_batch(seed: int = 0, b: int = 2, t: int = 8) -> dict[str, torch.Tensor
     first[:, 0] = True
     frames = torch.full((b, t, 144, 144, 3), 90, dtype=torch.uint8)
     goal = torch.nn.functional.one_hot(actions, GOAL_DIM).to(torch.float16)
-    return {"frames": frames, "actions": actions, "first": first, "goal": goal}
+    goal_mask = torch.ones(b, t, dtype=torch.bool)
+    return {"frames": frames, "actions": actions, "first": first, "goal": goal, "goal_mask": goal_mask}
 
 
 def _trainer(max_steps: int, root: Path, **kwargs) -> L.Trainer:
@@ -68,6 +69,25 @@ def test_learns_to_follow_the_goal_with_only_lora_and_conditioning(tmp_path: Pat
     for name, param in module.model.named_parameters():
         if name in base:
             assert torch.equal(param, base[name]), f"frozen {name} changed in training"
+
+
+def test_validation_reports_what_the_goal_is_worth(tmp_path: Path) -> None:
+    module = CSteve1(
+        backbone=str(_backbone_export(tmp_path)), goal_dim=GOAL_DIM, lora_rank=2, lr=3e-2,
+        tbptt_len=4, cosine_steps=1000, activation_checkpointing=False,
+    )
+    batch = _goal_batch()
+    trainer = _trainer(40, tmp_path)
+
+    def validate() -> dict[str, float]:
+        (metrics,) = trainer.validate(module, DataLoader([batch], batch_size=None), verbose=False)
+        return metrics
+
+    untrained = validate()
+    assert untrained["val/loss_goal"] == pytest.approx(untrained["val/loss_nogoal"], abs=1e-6)
+    trainer.fit(module, train_dataloaders=DataLoader([batch] * 40, batch_size=None))
+    trained = validate()
+    assert trained["val/loss_goal"] < 0.5 * trained["val/loss_nogoal"]
 
 
 def test_checkpoint_reloads_without_the_backbone_file(tmp_path: Path) -> None:

@@ -19,6 +19,7 @@ from zoo.agents import checkpoint_kind
 from zoo.agents.steve_agent import load_steve_checkpoint
 from zoo.cclip_demo import load_cclip_checkpoint
 from zoo.cli import main as zoo_main
+from zoo.data.shards import sha256_file
 from zoo.export import (
     CONFIG_FILE,
     DTYPES,
@@ -29,7 +30,6 @@ from zoo.export import (
     load_exported,
     load_policy_model,
     save_exported,
-    sha256,
 )
 from zoo.export_cli import DTYPE_CHOICES
 from zoo.models.cclip import build_cclip
@@ -245,7 +245,7 @@ def test_cvpt_export_without_kind_still_loads(tmp_path: Path) -> None:
         json.dumps({k: v for k, v in config.items() if k not in ("kind", "dtype")})
     )
     (out / "sha256.txt").write_text(
-        "".join(f"{sha256(out / name)}  {name}\n" for name in (WEIGHTS_FILE, CONFIG_FILE))
+        "".join(f"{sha256_file(out / name)}  {name}\n" for name in (WEIGHTS_FILE, CONFIG_FILE))
     )
     assert exported_kind(out) == "cvpt" and checkpoint_kind(out) == "cvpt"
     assert load_exported(out).config == model.config

@@ -44,6 +44,7 @@ from zoo.data.manifest import MANIFEST, load_manifest
 from zoo.data.reader import CorruptShardError, iter_episodes
 from zoo.data.shards import sha256_file, tar_member, tar_trailer
 from zoo.envs.schema import FRAME_SHAPE
+from zoo.export import checkpoint_sha256
 from zoo.models.cclip import CCLIPModel
 
 
@@ -246,7 +247,7 @@ def embed_dataset(
         "format": FORMAT, "version": FORMAT_VERSION, "embed_dim": embedder.embed_dim,
         "dtype": GOAL_DTYPE.name, "clip": dict(CLIP), "caption_priority": list(CAPTION_PRIORITY),
         "source": {"root": str(src), "manifest_sha256": sha256_file(src / MANIFEST)},
-        "checkpoint": {"path": str(checkpoint), "sha256": sha256_file(checkpoint)},
+        "checkpoint": {"path": str(checkpoint), "sha256": checkpoint_sha256(checkpoint)},
     }
     out.mkdir(parents=True, exist_ok=True)
     manifest = {**settings, "shards": [], "stats": {}}

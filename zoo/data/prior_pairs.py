@@ -17,7 +17,6 @@ and the counts. Both are written to temp names and renamed, so a killed run leav
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
 from collections import Counter
@@ -31,18 +30,11 @@ from tqdm import tqdm
 from zoo.captions.dataset import decode_caption_sample, list_caption_shards
 from zoo.captions.vocabulary import Vocabulary, load_vocabulary
 from zoo.cclip_demo import load_cclip_checkpoint
+from zoo.export import checkpoint_sha256
 from zoo.models.cclip import CCLIPModel
 
 PAIR_FIELDS = {"video": 2, "text": 2, "caption_id": 1, "variant": 1, "episode": 1, "step": 1}
 """Arrays of a pairs file and their number of dimensions."""
-
-
-def file_sha256(path: Path) -> str:
-    sha = hashlib.sha256()
-    with open(path, "rb") as file:
-        for block in iter(lambda: file.read(1 << 20), b""):
-            sha.update(block)
-    return sha.hexdigest()
 
 
 def sidecar_path(out: str | Path) -> Path:
@@ -164,7 +156,7 @@ def write_prior_pairs(
     arrays["text"] = encode_variants(model, vocabulary, arrays["caption_id"], arrays["variant"])
     info = {
         "checkpoint": str(checkpoint.resolve()),
-        "checkpoint_sha256": file_sha256(checkpoint),
+        "checkpoint_sha256": checkpoint_sha256(checkpoint),
         "embed_dim": int(arrays["video"].shape[1]),
         "source": str(src.resolve()),
         "split": split,
