@@ -52,28 +52,28 @@ class SteveDataModule(CrafterPlayDataModule):
         skip_corrupt: bool = False,
     ) -> None:
         """Args:
-            root: CrafterPlay folder (manifest.json + shards).
-            embeddings: its ``zoo data embed`` folder (C-CLIP goal embeddings + step captions).
-            relabel: ``event`` (the paper's event-based packing) or ``plain`` (STEVE-1's), for
-                the relabelling ablation.
-            min_gap: fewest steps a goal lies ahead (paper: 1).
-            max_gap: most steps a goal lies ahead (paper: 10).
-            uncond_prob: share of pieces without a goal, for classifier-free guidance (paper: 0.1).
-            partial_embeddings: train on the CrafterPlay shards that ``embeddings`` covers (a
-                ``zoo data embed --shards A:B`` run) instead of refusing an incomplete folder.
-            seq_len: steps per sequence (paper: 640).
-            batch_size: sequences per batch (paper: 128).
-            num_workers: DataLoader workers; each reads different shards.
-            noop_filter: drop noop runs shorter than ``min_noop_run``.
-            min_noop_run: noop runs at least this long are kept.
-            val_fraction: share of episodes in the validation split.
-            test_fraction: share of episodes in the test split.
-            split_salt: changes which episodes land in which split.
-            shuffle_buffer: training sequences held for shuffling.
-            train_batches_per_epoch: epoch length in batches; None: one pass.
-            pin_memory: page-locked batches for faster host-to-GPU copies.
-            seed: seed of the training order and the goals; None: ``seed_everything``'s.
-            skip_corrupt: skip unreadable shards with a warning instead of stopping.
+        root: CrafterPlay folder (manifest.json + shards).
+        embeddings: its ``zoo data embed`` folder (C-CLIP goal embeddings + step captions).
+        relabel: ``event`` (the paper's event-based packing) or ``plain`` (STEVE-1's), for
+            the relabelling ablation.
+        min_gap: fewest steps a goal lies ahead (paper: 1).
+        max_gap: most steps a goal lies ahead (paper: 10).
+        uncond_prob: share of pieces without a goal, for classifier-free guidance (paper: 0.1).
+        partial_embeddings: train on the CrafterPlay shards that ``embeddings`` covers (a
+            ``zoo data embed --shards A:B`` run) instead of refusing an incomplete folder.
+        seq_len: steps per sequence (paper: 640).
+        batch_size: sequences per batch (paper: 128).
+        num_workers: DataLoader workers; each reads different shards.
+        noop_filter: drop noop runs shorter than ``min_noop_run``.
+        min_noop_run: noop runs at least this long are kept.
+        val_fraction: share of episodes in the validation split.
+        test_fraction: share of episodes in the test split.
+        split_salt: changes which episodes land in which split.
+        shuffle_buffer: training sequences held for shuffling.
+        train_batches_per_epoch: epoch length in batches; None: one pass.
+        pin_memory: page-locked batches for faster host-to-GPU copies.
+        seed: seed of the training order and the goals; None: ``seed_everything``'s.
+        skip_corrupt: skip unreadable shards with a warning instead of stopping.
         """
         super().__init__(
             root=root,

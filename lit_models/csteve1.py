@@ -47,24 +47,24 @@ class CSteve1(SequenceBC):
         backbone_config: dict | None = None,
     ) -> None:
         """Args:
-            backbone: the C-VPT to start from: a ``zoo fit`` .ckpt or a ``zoo export`` folder.
-            goal_dim: goal embedding width; must equal the C-CLIP embedding size of the data.
-            conditioning: ``head`` (the paper's) or ``trxl_input`` (STEVE-1's; the ablation).
-            lora_rank: LoRA rank on the Transformer-XL (0: train the conditioning layer only).
-            lora_alpha: LoRA scale numerator.
-            lora_dropout: dropout on the LoRA branch.
-            lora_targets: TrXL linear layers given LoRA (None: query, key_value, out, ff.0, ff.3).
-            tbptt_len: window of truncated backprop (paper: 64).
-            lr: peak AdamW learning rate (paper: 1e-5).
-            weight_decay: AdamW decay of weight matrices (paper: 1e-4).
-            betas: AdamW betas.
-            warmup_steps: optimizer steps of linear warmup (paper: 10M frames).
-            cosine_steps: steps of the cosine decay (None: trainer.max_steps).
-            min_lr_ratio: final LR as a fraction of ``lr``.
-            label_smoothing: cross-entropy label smoothing.
-            activation_checkpointing: recompute each TBPTT window in backward.
-            backbone_config: the backbone's C-VPT config; filled in from ``backbone`` on first
-                build (leave it unset).
+        backbone: the C-VPT to start from: a ``zoo fit`` .ckpt or a ``zoo export`` folder.
+        goal_dim: goal embedding width; must equal the C-CLIP embedding size of the data.
+        conditioning: ``head`` (the paper's) or ``trxl_input`` (STEVE-1's; the ablation).
+        lora_rank: LoRA rank on the Transformer-XL (0: train the conditioning layer only).
+        lora_alpha: LoRA scale numerator.
+        lora_dropout: dropout on the LoRA branch.
+        lora_targets: TrXL linear layers given LoRA (None: query, key_value, out, ff.0, ff.3).
+        tbptt_len: window of truncated backprop (paper: 64).
+        lr: peak AdamW learning rate (paper: 1e-5).
+        weight_decay: AdamW decay of weight matrices (paper: 1e-4).
+        betas: AdamW betas.
+        warmup_steps: optimizer steps of linear warmup (paper: 10M frames).
+        cosine_steps: steps of the cosine decay (None: trainer.max_steps).
+        min_lr_ratio: final LR as a fraction of ``lr``.
+        label_smoothing: cross-entropy label smoothing.
+        activation_checkpointing: recompute each TBPTT window in backward.
+        backbone_config: the backbone's C-VPT config; filled in from ``backbone`` on first
+            build (leave it unset).
         """
         super().__init__()
         self.save_hyperparameters()

@@ -34,7 +34,9 @@ def accuracy_metrics(num_actions: int, prefix: str) -> MetricCollection:
     return MetricCollection(
         {
             "acc": MulticlassAccuracy(num_actions, average="micro", ignore_index=IGNORE_ACTION),
-            "acc_macro": MulticlassAccuracy(num_actions, average="macro", ignore_index=IGNORE_ACTION),
+            "acc_macro": MulticlassAccuracy(
+                num_actions, average="macro", ignore_index=IGNORE_ACTION
+            ),
         },
         prefix=prefix,
     )
@@ -51,9 +53,13 @@ class SequenceBC(L.LightningModule):
         self.val_metrics = accuracy_metrics(num_actions, "val/")
         self.test_metrics = accuracy_metrics(num_actions, "test/")
 
-    def forward(self, frames: torch.Tensor, first: torch.Tensor, *conditions: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, frames: torch.Tensor, first: torch.Tensor, *conditions: torch.Tensor
+    ) -> torch.Tensor:
         """Logits (B, T, num_actions) for whole sequences, window by window from empty memory."""
-        recompute = self.hparams.activation_checkpointing and self.training and torch.is_grad_enabled()
+        recompute = (
+            self.hparams.activation_checkpointing and self.training and torch.is_grad_enabled()
+        )
         state = self.model.initial_state(frames.shape[0], frames.device)
         window_logits = []
         for start in range(0, frames.shape[1], self.hparams.tbptt_len):
@@ -91,7 +97,9 @@ class SequenceBC(L.LightningModule):
         self.log_dict(metrics, batch_size=batch_size)
         return loss
 
-    def _eval_step(self, batch: dict[str, torch.Tensor], stage: str, metrics: MetricCollection) -> None:
+    def _eval_step(
+        self, batch: dict[str, torch.Tensor], stage: str, metrics: MetricCollection
+    ) -> None:
         actions = batch["actions"]
         logits = self.batch_logits(batch)
         loss = self._loss(logits, actions)
@@ -105,13 +113,18 @@ class SequenceBC(L.LightningModule):
     def test_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> None:
         self._eval_step(batch, "test", self.test_metrics)
 
-    def predict_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> dict[str, torch.Tensor]:
+    def predict_step(
+        self, batch: dict[str, torch.Tensor], batch_idx: int
+    ) -> dict[str, torch.Tensor]:
         """Per step: the expert's action, the policy's distribution and its most likely action,
         with the episode and step they belong to (``zoo predict`` writes these)."""
         probs = torch.softmax(self.batch_logits(batch).float(), dim=-1)
         return {
-            "episode": batch["episode"], "step": batch["step"], "action": batch["actions"],
-            "predicted": probs.argmax(-1), "probs": probs,
+            "episode": batch["episode"],
+            "step": batch["step"],
+            "action": batch["actions"],
+            "predicted": probs.argmax(-1),
+            "probs": probs,
         }
 
     def configure_optimizers(self):
@@ -138,7 +151,10 @@ class SequenceBC(L.LightningModule):
             )
         schedule = WarmupCosine(self.hparams.warmup_steps, total, self.hparams.min_lr_ratio)
         scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, schedule)
-        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
+        return {
+            "optimizer": optimizer,
+            "lr_scheduler": {"scheduler": scheduler, "interval": "step"},
+        }
 
 
 __all__ = ["IGNORE_ACTION", "SequenceBC", "accuracy_metrics"]

@@ -24,7 +24,7 @@ def caption_frames(frames: np.ndarray, text: str, scale: int = 2) -> np.ndarray:
     from PIL import Image, ImageDraw
 
     frames = np.asarray(frames).repeat(scale, axis=1).repeat(scale, axis=2)
-    t, h, w, _ = frames.shape
+    t, _, w, _ = frames.shape
     bar = Image.new("RGB", (w, CAPTION_BAR), (0, 0, 0))
     ImageDraw.Draw(bar).text((3, 1), text, fill=(255, 255, 255))
     bar_pixels = np.asarray(bar, dtype=np.uint8)
@@ -70,11 +70,19 @@ def register(subparsers) -> None:
             "OUT/play.json (achievements unlocked and their steps, actions, outcome)."
         ),
     )
-    p.add_argument("--checkpoint", required=True, help="C-Steve-1 .ckpt (or a C-VPT one, no instruction)")
-    p.add_argument("--instruction", default=None, help='e.g. "obtain wood" (a caption or free text)')
-    p.add_argument("--cclip", default=None, help="C-CLIP .ckpt C-Steve-1 was trained with (text goals)")
+    p.add_argument(
+        "--checkpoint", required=True, help="C-Steve-1 .ckpt (or a C-VPT one, no instruction)"
+    )
+    p.add_argument(
+        "--instruction", default=None, help='e.g. "obtain wood" (a caption or free text)'
+    )
+    p.add_argument(
+        "--cclip", default=None, help="C-CLIP .ckpt C-Steve-1 was trained with (text goals)"
+    )
     p.add_argument("--prior", default=None, help="CVAE prior .ckpt (text goals)")
-    p.add_argument("--cfg-scale", type=float, default=1.5, help="classifier-free guidance (paper 1.5)")
+    p.add_argument(
+        "--cfg-scale", type=float, default=1.5, help="classifier-free guidance (paper 1.5)"
+    )
     p.add_argument("--temperature", type=float, default=1.0, help="0: most likely action")
     p.add_argument("--env", choices=("craftax", "crafter"), default="craftax")
     p.add_argument("--seed", type=int, default=0, help="episode seed (episode 0 of this seed)")
@@ -92,7 +100,9 @@ def run_play(args: argparse.Namespace) -> int:
     if args.instruction is not None and kind != "csteve1":
         raise SystemExit(f"--instruction needs a C-Steve-1 checkpoint; {args.checkpoint} is {kind}")
     if args.instruction is not None and (args.cclip is None or args.prior is None):
-        raise SystemExit("--instruction needs --cclip and --prior (text -> C-CLIP -> prior -> goal)")
+        raise SystemExit(
+            "--instruction needs --cclip and --prior (text -> C-CLIP -> prior -> goal)"
+        )
     options = {"cclip": args.cclip, "prior": args.prior, "cfg_scale": args.cfg_scale}
     agent = load_checkpoint_agent(
         args.checkpoint, 1, args.temperature, **(options if kind == "csteve1" else {})

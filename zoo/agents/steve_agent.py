@@ -75,7 +75,9 @@ class GoalEncoder:
     def from_text(self, texts: list[str], seed: int = 0) -> torch.Tensor:
         """(N, D) goals for N instructions (C-CLIP text embedding -> prior)."""
         if self.prior is None:
-            raise ValueError("text instructions need the CVAE prior: pass a prior checkpoint (--prior)")
+            raise ValueError(
+                "text instructions need the CVAE prior: pass a prior checkpoint (--prior)"
+            )
         z_t = self.cclip.encode_text(list(texts))
         generator = torch.Generator(device=z_t.device).manual_seed(seed)
         goal = self.prior.sample(z_t, generator=generator, mean=not self.sample_prior)
@@ -148,7 +150,9 @@ class StevePolicy:
         first_t = torch.as_tensor(np.asarray(first, dtype=bool), device=self.device).unsqueeze(1)
         goals = torch.as_tensor(goals, device=self.device, dtype=torch.float32)
         if goals.shape != (n, self.goal_dim):
-            raise ValueError(f"goals must have shape ({n}, {self.goal_dim}), got {tuple(goals.shape)}")
+            raise ValueError(
+                f"goals must have shape ({n}, {self.goal_dim}), got {tuple(goals.shape)}"
+            )
         logits, state = self.model.guided_logits(
             frames_t, first_t, goals.unsqueeze(1), state, self.cfg_scale
         )

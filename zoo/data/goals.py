@@ -60,7 +60,10 @@ class GoalAttacher:
                 if current is None or current[0] != episode:
                     current = (episode, self._relabel(episodes, chunk["meta"], source["url"]))
                 offset, n = int(chunk["meta"]["offset"]), len(chunk["actions"])
-                yield {**chunk, **{key: value[offset : offset + n] for key, value in current[1].items()}}
+                yield {
+                    **chunk,
+                    **{key: value[offset : offset + n] for key, value in current[1].items()},
+                }
 
     def _relabel(
         self, episodes: dict[int, dict[str, np.ndarray]], meta: dict, url: str

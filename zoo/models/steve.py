@@ -55,9 +55,7 @@ class SteveConfig:
 
     def __post_init__(self) -> None:
         if self.conditioning not in CONDITIONINGS:
-            raise ValueError(
-                f"conditioning={self.conditioning!r}: expected one of {CONDITIONINGS}"
-            )
+            raise ValueError(f"conditioning={self.conditioning!r}: expected one of {CONDITIONINGS}")
         if self.goal_dim < 1 or self.lora_rank < 0:
             raise ValueError(
                 f"goal_dim={self.goal_dim} must be >= 1 and lora_rank={self.lora_rank} >= 0"
@@ -69,7 +67,14 @@ class SteveConfig:
     @classmethod
     def from_hparams(cls, hparams: dict) -> SteveConfig:
         """The config of a C-Steve-1 training run from its hyper-parameters (None: default)."""
-        names = ("goal_dim", "conditioning", "lora_rank", "lora_alpha", "lora_dropout", "lora_targets")
+        names = (
+            "goal_dim",
+            "conditioning",
+            "lora_rank",
+            "lora_alpha",
+            "lora_dropout",
+            "lora_targets",
+        )
         values = {name: hparams[name] for name in names if hparams.get(name) is not None}
         if "lora_targets" in values:
             values["lora_targets"] = list(values["lora_targets"])
@@ -108,7 +113,9 @@ class SteveModel(nn.Module):
     def _goal_term(self, goal: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
         expected = (*like.shape[:2], self.config.goal_dim)
         if tuple(goal.shape) != expected:
-            raise ValueError(f"goal must have shape {expected} (batch, time, goal_dim), got {tuple(goal.shape)}")
+            raise ValueError(
+                f"goal must have shape {expected} (batch, time, goal_dim), got {tuple(goal.shape)}"
+            )
         return self.condition(goal.to(self.condition.weight.dtype)).to(like.dtype)
 
     def forward(
@@ -140,8 +147,15 @@ class SteveModel(nn.Module):
         """
         uncond_goal = torch.zeros_like(goal)
         if self.config.conditioning == "head":
-            hidden, state = self.backbone.trxl(self.backbone.encode_frames(frames), first.bool(), state)
-            both = torch.cat([hidden + self._goal_term(goal, hidden), hidden + self._goal_term(uncond_goal, hidden)])
+            hidden, state = self.backbone.trxl(
+                self.backbone.encode_frames(frames), first.bool(), state
+            )
+            both = torch.cat(
+                [
+                    hidden + self._goal_term(goal, hidden),
+                    hidden + self._goal_term(uncond_goal, hidden),
+                ]
+            )
         else:
             x = self.backbone.encode_frames(frames)
             x = torch.cat([x + self._goal_term(goal, x), x + self._goal_term(uncond_goal, x)])
