@@ -70,6 +70,9 @@ def test_fit_then_play_an_instruction(
     assert main(argv) == 0
     report = json.loads((task_out / "report.json").read_text())
     assert report["episodes"] == 2 and 0 <= report["success_percent"] <= 100
+    no_text = ["eval", "--task", "collect_drink", "--checkpoint", str(checkpoint), "--env",
+               "crafter", "--episodes", "1", "--no-gif", "--out", str(tmp_path / "no_text")]
+    assert main(no_text) == 2  # a task's instructions need --cclip and --prior
 
 
 def test_goal_width_mismatch_is_named_before_training(

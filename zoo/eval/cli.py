@@ -109,6 +109,11 @@ def _build_agent(args: argparse.Namespace, num_envs: int):
         }
         if name != "csteve1" and (args.cclip or args.prior or args.cfg_scale != 1.5):
             raise UsageError("--cclip, --prior and --cfg-scale are for C-Steve-1 checkpoints only")
+        if name == "csteve1" and args.task and not (args.cclip and args.prior):
+            raise UsageError(
+                "C-Steve-1 on a task reads its instructions as text: give --cclip (the C-CLIP it "
+                "was trained with) and --prior (e.g. weights/cclip_cpu, weights/prior_cpu)"
+            )
         options = steve if name == "csteve1" else {}
         if args.agent is None:
             if checkpoint is None:
