@@ -91,14 +91,14 @@ class CSteve1(SequenceBC):
         """The usual val/loss, plus how much the goal helps: on the steps that have a goal,
         the loss with it (val/loss_goal) and with it zeroed (val/loss_nogoal, the unconditional
         policy CFG subtracts). An untrained C-Steve-1 has the two equal."""
-        super().validation_step(batch, batch_idx)
+        logits = self._eval_step(batch, "val", self.val_metrics)
         has_goal = batch["goal_mask"] & (batch["actions"] != IGNORE_ACTION)
         if not has_goal.any():
             return
         actions = batch["actions"].masked_fill(~has_goal, IGNORE_ACTION)
         frames, first, goal = batch["frames"], batch["first"], batch["goal"]
         losses = {
-            "val/loss_goal": self._loss(self(frames, first, goal), actions),
+            "val/loss_goal": self._loss(logits, actions),
             "val/loss_nogoal": self._loss(self(frames, first, torch.zeros_like(goal)), actions),
         }
         self.log_dict(losses, batch_size=actions.shape[0], sync_dist=True)

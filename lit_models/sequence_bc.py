@@ -99,13 +99,15 @@ class SequenceBC(L.LightningModule):
 
     def _eval_step(
         self, batch: dict[str, torch.Tensor], stage: str, metrics: MetricCollection
-    ) -> None:
+    ) -> torch.Tensor:
+        """Log the loss and update the metrics of one evaluation batch; its logits."""
         actions = batch["actions"]
         logits = self.batch_logits(batch)
         loss = self._loss(logits, actions)
         self.log(f"{stage}/loss", loss, prog_bar=True, batch_size=actions.shape[0], sync_dist=True)
         metrics.update(logits.flatten(0, 1), actions.flatten())
         self.log_dict(metrics, batch_size=actions.shape[0])
+        return logits
 
     def validation_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> None:
         self._eval_step(batch, "val", self.val_metrics)

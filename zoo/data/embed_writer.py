@@ -14,7 +14,6 @@ CrafterPlay manifest into the same folder is refused.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import time
@@ -42,7 +41,7 @@ from zoo.data.embed import (
 )
 from zoo.data.manifest import MANIFEST, load_manifest
 from zoo.data.reader import CorruptShardError, iter_episodes
-from zoo.data.shards import sha256_file, tar_member, tar_trailer
+from zoo.data.shards import sha256_file, tar_member, write_tar
 from zoo.envs.schema import FRAME_SHAPE
 from zoo.export import checkpoint_sha256
 from zoo.models.cclip import CCLIPModel
@@ -122,22 +121,7 @@ class ClipEmbedder:
 
 def _write_shard(path: Path, samples: list[list[tuple[str, bytes]]]) -> str:
     """Fixed-header tar (bytes depend on content only) via a temp name; returns its sha256."""
-    tmp = path.with_name(f"{path.name}.tmp-{os.getpid()}")
-    digest, size = hashlib.sha256(), 0
-    with open(tmp, "wb") as out:
-        for members in samples:
-            for name, data in members:
-                block = tar_member(name, data)
-                out.write(block)
-                digest.update(block)
-                size += len(block)
-        trailer = tar_trailer(size)
-        out.write(trailer)
-        digest.update(trailer)
-        out.flush()
-        os.fsync(out.fileno())
-    os.replace(tmp, path)
-    return digest.hexdigest()
+    return write_tar(path, (tar_member(name, data) for members in samples for name, data in members))
 
 
 def embed_shard(embedder: ClipEmbedder, src: Path, entry: dict, out: Path, advance=None) -> dict:

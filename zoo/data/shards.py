@@ -14,6 +14,7 @@ import hashlib
 import os
 import tarfile
 import threading
+from collections.abc import Iterable, Iterator
 from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from pathlib import Path
 
@@ -186,23 +187,34 @@ class EpisodeRecorder:
         self.spool.unlink()
 
 
-def assemble_shard(fragments: list[Path], path: Path) -> str:
-    """Concatenate episode fragments into ``path`` (via a temp name); return its sha256."""
+def write_tar(path: Path, blocks: Iterable[bytes]) -> str:
+    """Write tar member ``blocks`` and the end-of-archive trailer to ``path`` via a temp name
+    (renamed when complete and synced, so a killed writer leaves no half shard); its sha256."""
     tmp = path.with_name(path.name + f".tmp-{os.getpid()}")
     digest, size = hashlib.sha256(), 0
     with open(tmp, "wb") as out:
-        for fragment in fragments:
-            with open(fragment, "rb") as f:
-                for block in iter(lambda: f.read(1 << 20), b""):
-                    out.write(block)
-                    digest.update(block)
-                    size += len(block)
+        for block in blocks:
+            out.write(block)
+            digest.update(block)
+            size += len(block)
         trailer = tar_trailer(size)
         out.write(trailer)
         digest.update(trailer)
         out.flush()
         os.fsync(out.fileno())
     os.replace(tmp, path)
+    return digest.hexdigest()
+
+
+def _file_blocks(paths: list[Path]) -> Iterator[bytes]:
+    for fragment in paths:
+        with open(fragment, "rb") as f:
+            yield from iter(lambda f=f: f.read(1 << 20), b"")
+
+
+def assemble_shard(fragments: list[Path], path: Path) -> str:
+    """Concatenate episode fragments into ``path`` (via a temp name); return its sha256."""
+    sha = write_tar(path, _file_blocks(fragments))
     for fragment in fragments:
         fragment.unlink()
-    return digest.hexdigest()
+    return sha

@@ -115,40 +115,29 @@ SINGLE_STEP_LIMIT = 500  # the paper gives none; ~50x the goal-directed expert's
 _WOOD_TOOL = {Item.WOOD: 3}
 _STONE_TOOL = {Item.WOOD: 3, Item.STONE: 1, Item.WOOD_PICKAXE: 1}
 
+def _single_step(
+    name: str, sub: SubTask, inventory: dict[Item, int], description: str
+) -> TaskSpec:
+    return TaskSpec(name, (sub,), inventory, max_steps=SINGLE_STEP_LIMIT, description=description)
+
+
 TASKS: dict[str, TaskSpec] = {
     t.name: t
     for t in (
-        TaskSpec(
-            "collect_sapling", (SAPLING,), max_steps=SINGLE_STEP_LIMIT,
-            description="collect a sapling",
+        _single_step("collect_sapling", SAPLING, {}, "collect a sapling"),
+        _single_step("collect_drink", DRINK_SUB, {}, "drink water"),
+        _single_step("make_wood_pickaxe", WOOD_PICKAXE, _WOOD_TOOL, "craft a wood pickaxe"),
+        _single_step(
+            "make_wood_sword", _sub(Achievement.MAKE_WOOD_SWORD, "craft wood sword"), _WOOD_TOOL,
+            "craft a wood sword",
         ),
-        TaskSpec(
-            "collect_drink", (DRINK_SUB,), max_steps=SINGLE_STEP_LIMIT, description="drink water"
+        _single_step(
+            "make_stone_pickaxe", _sub(Achievement.MAKE_STONE_PICKAXE, "craft stone pickaxe"),
+            _STONE_TOOL, "craft a stone pickaxe",
         ),
-        TaskSpec(
-            "make_wood_pickaxe", (WOOD_PICKAXE,), _WOOD_TOOL, max_steps=SINGLE_STEP_LIMIT,
-            description="craft a wood pickaxe",
-        ),
-        TaskSpec(
-            "make_wood_sword",
-            (_sub(Achievement.MAKE_WOOD_SWORD, "craft wood sword"),),
-            _WOOD_TOOL,
-            max_steps=SINGLE_STEP_LIMIT,
-            description="craft a wood sword",
-        ),
-        TaskSpec(
-            "make_stone_pickaxe",
-            (_sub(Achievement.MAKE_STONE_PICKAXE, "craft stone pickaxe"),),
-            _STONE_TOOL,
-            max_steps=SINGLE_STEP_LIMIT,
-            description="craft a stone pickaxe",
-        ),
-        TaskSpec(
-            "make_stone_sword",
-            (_sub(Achievement.MAKE_STONE_SWORD, "craft stone sword"),),
-            _STONE_TOOL,
-            max_steps=SINGLE_STEP_LIMIT,
-            description="craft a stone sword",
+        _single_step(
+            "make_stone_sword", _sub(Achievement.MAKE_STONE_SWORD, "craft stone sword"),
+            _STONE_TOOL, "craft a stone sword",
         ),
         TaskSpec(
             "T1", (SAPLING, PLANT, EAT_PLANT), peaceful=True,
