@@ -31,8 +31,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="zoo",
         description=(
             "crafter-zoo: the CrafterDojo suite for Crafter. Generate expert data "
-            "(zoo data generate), score agents in Craftax-Classic or crafter (zoo eval), and "
-            "train models with LightningCLI (zoo fit --config configs/cvpt_smoke.yaml)."
+            "(zoo data generate), score agents in Craftax-Classic or crafter (zoo eval; task "
+            "suites with zoo eval --task), train models with LightningCLI (zoo fit --config "
+            "configs/cvpt_smoke.yaml), and watch C-Steve-1 follow an instruction (zoo play)."
         ),
         epilog="Training verbs: " + ", ".join(TRAIN_VERBS) + " (see `zoo fit --help`).",
     )

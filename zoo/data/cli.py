@@ -29,7 +29,9 @@ def _data_dir(text: str) -> Path:
 
 
 def register(subparsers) -> None:
-    data = subparsers.add_parser("data", help="CrafterPlay datasets: generate, info")
+    data = subparsers.add_parser(
+        "data", help="datasets: generate, info, caption, embed (C-Steve-1 goals), prior-pairs"
+    )
     data.set_defaults(handler=lambda args: data.print_help() or 2)
     data_sub = data.add_subparsers(dest="data_command", metavar="DATA_COMMAND")
 
