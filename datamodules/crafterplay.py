@@ -31,6 +31,7 @@ from datamodules.seeded_shuffle import (
     EpochSeeded,
     EpochSeededStream,
     SeededShuffle,
+    WeightedDraws,
     run_seed,
     seeded_loader,
 )
@@ -46,6 +47,32 @@ from zoo.data.sequences import (
 )
 
 
+def data_sources(root: str | None, sources: list[dict] | None) -> tuple[list[str], list[float]]:
+    """The folders and weights of ``root`` or ``sources``, checked (errors name the field)."""
+    if (root is None) == (sources is None):
+        raise ValueError(
+            "give data.init_args.root (one CrafterPlay folder) or data.init_args.sources "
+            "([{root: DIR, weight: W}, ...]), exactly one of them"
+        )
+    if root is not None:
+        return [str(root)], [1.0]
+    if not sources:
+        raise ValueError("data.init_args.sources is empty; expected [{root: DIR, weight: W}, ...]")
+    roots, weights = [], []
+    for i, source in enumerate(sources):
+        if not isinstance(source, dict) or "root" not in source:
+            raise ValueError(f"data.init_args.sources[{i}] is {source!r}; expected {{root: DIR, weight: W}}")
+        unknown = sorted(set(source) - {"root", "weight"})
+        if unknown:
+            raise ValueError(f"data.init_args.sources[{i}] has unknown keys {unknown}; expected root, weight")
+        weight = float(source.get("weight", 1.0))
+        if not weight > 0:
+            raise ValueError(f"data.init_args.sources[{i}].weight must be > 0, got {weight}")
+        roots.append(str(source["root"]))
+        weights.append(weight)
+    return roots, weights
+
+
 class CrafterPlayDataModule(L.LightningDataModule):
     """Streams CrafterPlay shards as batches of long, noop-filtered sequences."""
 
@@ -54,7 +81,7 @@ class CrafterPlayDataModule(L.LightningDataModule):
 
     def __init__(
         self,
-        root: str,
+        root: str | None = None,
         seq_len: int = 640,
         batch_size: int = 128,
         num_workers: int = 4,
@@ -68,9 +95,11 @@ class CrafterPlayDataModule(L.LightningDataModule):
         pin_memory: bool = True,
         seed: int | None = None,
         skip_corrupt: bool = False,
+        sources: list[dict] | None = None,
     ) -> None:
         """Args:
-            root: CrafterPlay folder (manifest.json + shards), e.g. from `zoo data generate`.
+            root: CrafterPlay folder (manifest.json + shards), e.g. from `zoo data generate`;
+                or give ``sources`` instead.
             seq_len: steps per sequence (paper: 640); the model cuts it into TBPTT windows.
             batch_size: sequences per batch (per device).
             num_workers: DataLoader workers; each reads different shards.
@@ -88,6 +117,9 @@ class CrafterPlayDataModule(L.LightningDataModule):
                 ``seed_everything`` value.
             skip_corrupt: skip a shard that cannot be read to its end (with a warning that names
                 it) instead of stopping the run; its chunks before the damage are still used.
+            sources: several CrafterPlay folders with weights, ``[{root: DIR, weight: W}, ...]``
+                (expert data plus DAgger rounds): training draws shards so that each folder
+                gives a share W / sum(W) of the steps; validation and test read every folder.
         """
         super().__init__()
         self.save_hyperparameters()
@@ -96,15 +128,16 @@ class CrafterPlayDataModule(L.LightningDataModule):
                 f"val_fraction={val_fraction} and test_fraction={test_fraction} must be >= 0 "
                 "and leave a training share (sum < 1)"
             )
+        self._roots, self._weights = data_sources(root, sources)
         self._shards: ShardSources | None = None
 
     @property
     def shards(self) -> ShardSources:
-        """The shards the manifest lists, in index order."""
+        """The shards the manifests list, folder by folder, in index order."""
         if self._shards is None:
-            self._shards = ShardSources(self.hparams.root)
+            self._shards = ShardSources(self._roots, self._weights)
             if not self._shards:
-                raise FileNotFoundError(f"no CrafterPlay shards listed in {self.hparams.root}")
+                raise FileNotFoundError(f"no CrafterPlay shards listed in {', '.join(self._roots)}")
         return self._shards
 
     def dataset(self, split: str, first_epoch: int = 0) -> EpochSeededStream:
@@ -119,7 +152,9 @@ class CrafterPlayDataModule(L.LightningDataModule):
         train = split == "train"
         shuffles: list[EpochSeeded] = []
         stages = [self.shards, wds.split_by_node, wds.split_by_worker]
-        if train:
+        if train and len(self._roots) > 1:
+            shuffles.append(WeightedDraws(salt=2))
+        elif train:
             shuffles.append(SeededShuffle(len(self.shards), salt=0))
         stages += shuffles
         reader = self.chunk_reader()

@@ -40,11 +40,10 @@ class EpochSeeded(Protocol):
     def start_epoch(self, seed: int, epoch: int) -> None: ...
 
 
-class SeededShuffle:
-    """A shuffle-buffer stage; ``start_epoch`` fixes the order of the passes that follow."""
+class _PassSeeded:
+    """A stage whose n-th pass of an epoch draws from rng(seed, epoch, rank, worker, salt, n)."""
 
-    def __init__(self, bufsize: int, salt: int) -> None:
-        self.bufsize = bufsize
+    def __init__(self, salt: int) -> None:
         self.salt = salt
         self.seed = 0
         self.epoch = 0
@@ -53,10 +52,22 @@ class SeededShuffle:
     def start_epoch(self, seed: int, epoch: int) -> None:
         self.seed, self.epoch, self.passes = seed, epoch, 0
 
-    def __call__(self, items: Iterable) -> Iterator:
+    def _next_pass_rng(self) -> random.Random:
         rank, _, worker, _ = pytorch_worker_info()
         rng = random.Random(f"{self.seed}:{self.epoch}:{rank}:{worker}:{self.salt}:{self.passes}")
         self.passes += 1  # a stream repeated within an epoch (with_epoch) reorders each pass
+        return rng
+
+
+class SeededShuffle(_PassSeeded):
+    """A shuffle-buffer stage; ``start_epoch`` fixes the order of the passes that follow."""
+
+    def __init__(self, bufsize: int, salt: int) -> None:
+        super().__init__(salt)
+        self.bufsize = bufsize
+
+    def __call__(self, items: Iterable) -> Iterator:
+        rng = self._next_pass_rng()
         buffer: list = []
         for item in items:
             if len(buffer) < self.bufsize:
@@ -67,6 +78,17 @@ class SeededShuffle:
             yield item
         rng.shuffle(buffer)
         yield from buffer
+
+
+class WeightedDraws(_PassSeeded):
+    """Draws shards with replacement in proportion to their ``draw_weight`` (several datasets
+    mixed by weight), as many per pass as it is given; ``start_epoch`` fixes the draws."""
+
+    def __call__(self, items: Iterable[dict]) -> Iterator[dict]:
+        rng = self._next_pass_rng()
+        items = list(items)
+        if items:
+            yield from rng.choices(items, weights=[it["draw_weight"] for it in items], k=len(items))
 
 
 class EpochSeededStream(IterableDataset):

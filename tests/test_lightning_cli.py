@@ -118,7 +118,9 @@ def test_every_shipped_config_parses_and_builds(config: Path) -> None:
     # save_hyperparameters() keeps every value the file sets: checkpoints rebuild the model alone
     init_args = yaml.safe_load(config.read_text())["model"]["init_args"]
     assert {k: cli.model.hparams.get(k, "<missing>") for k in init_args} == init_args
-    assert cli.datamodule.hparams["root"].startswith("data/")
+    data = cli.datamodule.hparams
+    roots = [data["root"]] if data.get("root") else [s["root"] for s in data["sources"]]
+    assert roots and all(root.startswith("data/") for root in roots)
 
 
 def test_predict_writes_the_test_episodes_actions_and_distributions(crafterplay: Path, tmp_path: Path) -> None:

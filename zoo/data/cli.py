@@ -1,4 +1,4 @@
-"""`zoo data generate|info` (and `zoo data caption` when zoo.captions provides it)."""
+"""`zoo data generate|dagger|info` (and `zoo data caption` when zoo.captions provides it)."""
 
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ def _data_dir(text: str) -> Path:
 
 def register(subparsers) -> None:
     data = subparsers.add_parser(
-        "data", help="datasets: generate, info, caption, embed (C-Steve-1 goals), prior-pairs"
+        "data", help="datasets: generate, dagger, info, caption, embed (C-Steve-1 goals), prior-pairs"
     )
     data.set_defaults(handler=lambda args: data.print_help() or 2)
     data_sub = data.add_subparsers(dest="data_command", metavar="DATA_COMMAND")
@@ -43,17 +43,30 @@ def register(subparsers) -> None:
     )
     gen.add_argument("--expert", required=True, choices=AGENT_NAMES)
     gen.add_argument("--checkpoint", help="expert checkpoint (needed by --expert ppo)")
-    gen.add_argument("--episodes", required=True, type=positive_int)
-    gen.add_argument("--seed", required=True, type=int)
-    gen.add_argument("--out", required=True, type=_out_dir, help="dataset folder")
-    gen.add_argument("--workers", type=positive_int, default=1, help="shard processes")
-    gen.add_argument("--env", choices=ENV_NAMES, default="craftax")
-    gen.add_argument("--episodes-per-shard", type=positive_int, default=16)
-    gen.add_argument("--chunk-length", type=positive_int, default=256, help="steps per sample")
-    gen.add_argument("--max-steps", type=positive_int, default=10_000, help="episode step limit")
-    gen.add_argument("--num-envs", type=positive_int, default=8, help="episodes played at once")
-    gen.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_play_args(gen)
     gen.set_defaults(handler=_generate, _parser=gen)
+
+    dagger = data_sub.add_parser(
+        "dagger",
+        help="DAgger rollouts: a C-VPT plays, the scripted expert labels every state",
+        description="Write CrafterPlay shards whose actions are the expert's labels of the "
+        "states the learner reached (manifest: source dagger, round, learner sha256, beta). "
+        "Resumable and deterministic like `zoo data generate`; train on them together with "
+        "the expert data through the datamodule's `sources`. See docs/dagger.md.",
+    )
+    dagger.add_argument("--checkpoint", required=True,
+                        help="the learner: a C-VPT .ckpt from zoo fit or a zoo export folder")
+    dagger.add_argument("--expert", choices=("scripted",), default="scripted",
+                        help="the labeller (it must read the state)")
+    dagger.add_argument("--beta", type=float, default=0.0,
+                        help="probability that the expert acts instead of the learner")
+    dagger.add_argument("--mix", choices=("episode", "step"), default="episode",
+                        help="one beta draw per episode or per step")
+    dagger.add_argument("--round", type=int, default=1, help="DAgger round, for the manifest")
+    dagger.add_argument("--temperature", type=float, default=1.0,
+                        help="the learner's sampling temperature")
+    _add_play_args(dagger)
+    dagger.set_defaults(handler=_dagger, _parser=dagger)
 
     info = data_sub.add_parser("info", help="counts, noop ratios, unlock rates; verify sha256")
     info.add_argument("dir", type=_data_dir, help="dataset folder")
@@ -68,9 +81,24 @@ def register(subparsers) -> None:
         importlib.import_module("zoo.captions.cli").register_data_commands(data_sub)
 
 
+def _add_play_args(parser: argparse.ArgumentParser) -> None:
+    """Arguments shared by `generate` and `dagger`: how many episodes, where, how."""
+    parser.add_argument("--episodes", required=True, type=positive_int)
+    parser.add_argument("--seed", required=True, type=int)
+    parser.add_argument("--out", required=True, type=_out_dir, help="dataset folder")
+    parser.add_argument("--workers", type=positive_int, default=1, help="shard processes")
+    parser.add_argument("--env", choices=ENV_NAMES, default="craftax")
+    parser.add_argument("--episodes-per-shard", type=positive_int, default=16)
+    parser.add_argument("--chunk-length", type=positive_int, default=256, help="steps per sample")
+    parser.add_argument("--max-steps", type=positive_int, default=10_000,
+                        help="episode step limit")
+    parser.add_argument("--num-envs", type=positive_int, default=8,
+                        help="episodes played at once")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
 def _generate(args) -> int:
-    from zoo.data.generate import GenerationConfig, generate
-    from zoo.data.manifest import DatasetMismatchError
+    from zoo.data.generate import GenerationConfig
 
     checkpoint = None
     if args.checkpoint is not None:
@@ -84,10 +112,42 @@ def _generate(args) -> int:
         env=args.env, episodes_per_shard=args.episodes_per_shard,
         chunk_length=args.chunk_length, max_steps=args.max_steps,
     )
+    return _run_generation(config, args, "generate")
+
+
+def _dagger(args) -> int:
+    import os
+
+    from zoo.data.generate import GenerationConfig
+    from zoo.export import checkpoint_sha256
+
+    learner = Path(args.checkpoint)
+    if not learner.exists():
+        args._parser.error(f"--checkpoint {learner} does not exist")
+    if not 0.0 <= args.beta <= 1.0:
+        args._parser.error(f"--beta must be in [0, 1], got {args.beta}")
+    if args.temperature <= 0:
+        args._parser.error(f"--temperature must be > 0, got {args.temperature}")
+    config = GenerationConfig(
+        expert=args.expert, episodes=args.episodes, seed=args.seed, env=args.env,
+        episodes_per_shard=args.episodes_per_shard, chunk_length=args.chunk_length,
+        max_steps=args.max_steps, source="dagger", learner=str(learner.resolve()),
+        learner_sha256=checkpoint_sha256(learner), learner_temperature=args.temperature,
+        beta=args.beta, mix=args.mix, round=args.round,
+    )
+    if args.workers > 1:  # each spawned worker runs the learner: share the cores, not oversubscribe
+        os.environ.setdefault("OMP_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // args.workers)))
+    return _run_generation(config, args, "dagger")
+
+
+def _run_generation(config, args, command: str) -> int:
+    from zoo.data.generate import generate
+    from zoo.data.manifest import DatasetMismatchError
+
     try:
         manifest = generate(config, args.out, args.workers, args.num_envs, not args.no_progress)
     except DatasetMismatchError as err:
-        print(f"zoo data generate: {err}", file=sys.stderr)
+        print(f"zoo data {command}: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted; rerun the same command to finish the dataset", file=sys.stderr)
@@ -95,6 +155,9 @@ def _generate(args) -> int:
     steps = sum(e["steps"] for e in manifest["shards"])
     shards = len(manifest["shards"])
     print(f"{args.out}: {shards} shards, {config.episodes} episodes, {steps} steps")
+    if config.source == "dagger":
+        agreement = sum(e["dagger"]["learner_agreement"] * e["steps"] for e in manifest["shards"])
+        print(f"learner agreed with the expert's label on {agreement / max(steps, 1):.1%} of steps")
     return 0
 
 

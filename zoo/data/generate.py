@@ -60,6 +60,13 @@ class GenerationConfig:
         min_noop_run: filter threshold used for the noop statistics in the manifest.
         zstd_level: zstd level for frames and arrays.
         zstd_window_log: zstd window (log2 bytes).
+        source: "dagger" for DAgger rollouts (``zoo data dagger``); None: the expert plays.
+        learner: DAgger: the C-VPT (.ckpt or export folder) that plays; the expert labels.
+        learner_sha256: DAgger: the learner's fingerprint (``zoo.export.checkpoint_sha256``).
+        learner_temperature: DAgger: the learner's sampling temperature.
+        beta: DAgger: probability that the expert acts instead of the learner.
+        mix: DAgger: "episode" or "step", what one beta draw decides.
+        round: DAgger: the round number, for the record.
     """
 
     expert: str
@@ -73,6 +80,24 @@ class GenerationConfig:
     min_noop_run: int = 20
     zstd_level: int = 2
     zstd_window_log: int = 25
+    source: str | None = None
+    learner: str | None = None
+    learner_sha256: str | None = None
+    learner_temperature: float | None = None
+    beta: float | None = None
+    mix: str | None = None
+    round: int | None = None
+
+    def __post_init__(self) -> None:
+        dagger = (self.learner, self.learner_sha256, self.learner_temperature, self.beta, self.mix)
+        if self.source == "dagger" and None in dagger:
+            raise ValueError(
+                "a DAgger dataset needs learner, learner_sha256, learner_temperature, beta, mix"
+            )
+        if self.source not in (None, "dagger"):
+            raise ValueError(f"source must be None or 'dagger', got {self.source!r}")
+        if self.source is None and any(v is not None for v in dagger):
+            raise ValueError("learner, beta and mix apply to source='dagger' only")
 
     @property
     def num_shards(self) -> int:
@@ -102,7 +127,15 @@ class ShardGenerator:
         self.config = config
         self.num_envs = max(1, min(num_envs, config.episodes_per_shard, config.episodes))
         self.env = make_env(config.env, self.num_envs, pixels=True, max_steps=config.max_steps)
-        self.agent = make_agent(config.expert, self.num_envs, config.checkpoint)
+        if config.source == "dagger":
+            from zoo.data.dagger import make_dagger_agent
+
+            self.agent = make_dagger_agent(
+                self.num_envs, config.expert, config.learner, config.beta, config.mix,
+                config.learner_temperature,
+            )
+        else:
+            self.agent = make_agent(config.expert, self.num_envs, config.checkpoint)
         self.versions = package_versions()
 
     def run(self, index: int, out: Path, progress: ProgressFn | None = None) -> dict:
@@ -114,6 +147,10 @@ class ShardGenerator:
         episodes = iter(cfg.shard_episodes(index))
         summaries: dict[int, dict] = {}
         meta = {"env": cfg.env, "expert": cfg.expert}
+        if cfg.source is not None:
+            meta["source"] = cfg.source
+        agreed = np.zeros(self.num_envs, np.int64)  # DAgger: learner's action == the label
+        drove = np.zeros(self.num_envs, np.int64)  # DAgger: steps the expert acted
         recorders: list[EpisodeRecorder | None] = [None] * self.num_envs
         seeds = np.zeros(self.num_envs, np.int64)
 
@@ -128,6 +165,7 @@ class ShardGenerator:
                 recorders[slot] = EpisodeRecorder(
                     episode, int(seeds[slot]), workdir, cfg.chunk_length, meta, encoder, cfg.codec
                 )
+                agreed[slot] = drove[slot] = 0
                 return True
 
             for slot in range(self.num_envs):
@@ -139,16 +177,21 @@ class ShardGenerator:
             while any(rec is not None for rec in recorders):
                 actions = np.asarray(self.agent.act(step))
                 after = self.env.step(actions)
-                noop = noop_flags(actions, step.state, after.state)
+                labels, noop = self._labels(actions, step, after)
+                if cfg.source == "dagger":
+                    agreed += self.agent.learner_actions == labels
+                    drove += self.agent.expert_drove
                 restart = np.zeros(self.num_envs, bool)
                 for slot, rec in enumerate(recorders):
                     if rec is None:
                         continue
-                    rec.act(int(actions[slot]), float(after.reward[slot]), bool(noop[slot]))
+                    rec.act(int(labels[slot]), float(after.reward[slot]), bool(noop[slot]))
                     rec.observe(after.frames[slot], index_state(after.state, slot))
                     frames += 1
                     if after.done[slot]:
                         summaries[rec.episode] = self._summary(rec)
+                        if cfg.source == "dagger":
+                            summaries[rec.episode]["dagger"] = (int(agreed[slot]), int(drove[slot]))
                         if progress:
                             progress(1, frames)
                             frames = 0
@@ -172,6 +215,19 @@ class ShardGenerator:
         sha = assemble_shard([workdir / f"e{e:07d}.tar" for e in order], path)
         shutil.rmtree(workdir, ignore_errors=True)
         return self._entry(index, path, sha, [summaries[e] for e in order])
+
+    def _labels(self, actions: np.ndarray, step: Step, after: Step) -> tuple[np.ndarray, np.ndarray]:
+        """The actions to store and their noop flags.
+
+        Expert play stores what was played. DAgger stores the expert's label of each visited
+        state; a step counts as a noop only when the played action had no effect and was the
+        label too, so states where the learner idles keep the expert's way out.
+        """
+        noop = noop_flags(actions, step.state, after.state)
+        if self.config.source != "dagger":
+            return actions, noop
+        labels = self.agent.labels
+        return labels, noop & (labels == actions)
 
     @staticmethod
     def _observe(step: Step, recorders: list, mask: np.ndarray) -> None:
@@ -201,7 +257,15 @@ class ShardGenerator:
         noop["ratio_after"] = noop["kept_noop_steps"] / max(noop["kept_steps"], 1)
         noop["min_run"] = cfg.min_noop_run
         unlocks = np.sum([e["achievements"] for e in episodes], axis=0)
+        extra = {}
+        if cfg.source == "dagger":
+            steps = sum(e["length"] for e in episodes)
+            extra["dagger"] = {
+                "learner_agreement": sum(e["dagger"][0] for e in episodes) / max(steps, 1),
+                "expert_share": sum(e["dagger"][1] for e in episodes) / max(steps, 1),
+            }
         return {
+            **extra,
             "file": path.name,
             "index": index,
             "sha256": sha,

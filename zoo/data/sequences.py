@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import warnings
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -24,18 +24,39 @@ SEQUENCE_KEYS = ("frames", "actions", "first", "episode", "step")
 
 
 class ShardSources(IterableDataset):
-    """{"url", "episodes", "index"} per shard of a CrafterPlay folder, in index order, from its manifest:
-    the first stage of a webdataset pipeline (like ``SimpleShardList``, plus episode counts)."""
+    """{"url", "episodes", "index", "steps", "source", "draw_weight"} per shard of one or more
+    CrafterPlay folders, in folder then index order, from their manifests: the first stage of a
+    webdataset pipeline (like ``SimpleShardList``, plus what the later stages need).
 
-    def __init__(self, root: str | Path) -> None:
-        manifest = load_manifest(root)
-        if manifest is None:
-            raise FileNotFoundError(f"{Path(root) / MANIFEST} not found: not a CrafterPlay folder")
-        entries = sorted(manifest["shards"], key=lambda e: e["index"])
-        self.sources = [
-            {"url": str(Path(root) / e["file"]), "episodes": int(e["episodes"]), "index": e["index"]}
-            for e in entries
-        ]
+    ``source`` is the folder's position in ``roots``. ``draw_weight`` = weight / steps of the
+    folder, so drawing shards in proportion to it gives each folder ``weight`` of the steps
+    (``datamodules.seeded_shuffle.WeightedDraws``).
+    """
+
+    def __init__(
+        self, roots: str | Path | Sequence[str | Path], weights: Sequence[float] | None = None
+    ) -> None:
+        roots = [roots] if isinstance(roots, (str, Path)) else list(roots)
+        weights = [1.0] * len(roots) if weights is None else list(weights)
+        if len(weights) != len(roots):
+            raise ValueError(f"{len(roots)} CrafterPlay folders but {len(weights)} weights")
+        self.sources = []
+        for source, (root, weight) in enumerate(zip(roots, weights)):
+            manifest = load_manifest(root)
+            if manifest is None:
+                raise FileNotFoundError(
+                    f"{Path(root) / MANIFEST} not found: not a CrafterPlay folder"
+                )
+            entries = sorted(manifest["shards"], key=lambda e: e["index"])
+            total = max(1, sum(int(e["steps"]) for e in entries))
+            self.sources += [
+                {
+                    "url": str(Path(root) / e["file"]), "episodes": int(e["episodes"]),
+                    "index": e["index"], "steps": int(e["steps"]), "source": source,
+                    "draw_weight": float(weight) / total,
+                }
+                for e in entries
+            ]
 
     def __len__(self) -> int:
         return len(self.sources)
@@ -77,7 +98,9 @@ def read_shards(sources: Iterable[dict], skip_corrupt: bool) -> Iterator[dict]:
     stats = ReadStats()
     for source in sources:
         try:
-            yield from _whole_shard(source["url"], source["episodes"])
+            for chunk in _whole_shard(source["url"], source["episodes"]):
+                chunk["meta"]["source"] = source.get("source", 0)  # episodes are per folder
+                yield chunk
         except CorruptShardError as err:
             if not skip_corrupt:
                 raise
@@ -108,8 +131,8 @@ def pack_sequences(
 ) -> Iterator[dict]:
     """Join consecutive chunks into sequences of exactly ``seq_len`` steps.
 
-    ``first`` is True at the first step of a chunk whose episode differs from the previous
-    chunk's (so at each episode's first kept step). A shorter remainder at the end of the
+    ``first`` is True at the first step of a chunk that starts an episode or whose episode
+    (of its source folder) differs from the previous chunk's: at each episode's first kept step. A shorter remainder at the end of the
     stream is dropped. ``extra_keys`` are further per-step arrays of the chunks to carry
     along (C-Steve-1's goals).
     """
@@ -120,10 +143,12 @@ def pack_sequences(
         n = len(chunk["actions"])
         if n == 0:
             continue
-        episode = int(chunk["meta"]["episode"])
+        meta = chunk["meta"]
+        episode = int(meta["episode"])
+        key = (meta.get("source", 0), episode)
         first = np.zeros(n, dtype=bool)
-        first[0] = episode != previous_episode
-        previous_episode = episode
+        first[0] = key != previous_episode or int(meta["offset"]) == 0
+        previous_episode = key
         pending["frames"].append(chunk["frames"])
         pending["actions"].append(np.asarray(chunk["actions"], dtype=np.int64))
         pending["first"].append(first)

@@ -1,0 +1,141 @@
+"""DAgger rollouts: the learner plays, the expert's labels are stored, the manifest says so."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from zoo.cli import main
+from zoo.data.dagger import DaggerMixture
+from zoo.data.reader import iter_episodes
+from zoo.envs.base import Step
+from zoo.experts.scripted import ScriptedExpert
+from zoo.export import checkpoint_sha256, save_exported
+from zoo.models.cvpt import CVPTConfig, CVPTModel
+
+SIZES = dict(d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(4, 8, 8),
+             encoder_hidden=32, memory_len=3)
+
+
+class ConstantAgent:
+    """Always plays one action (a stand-in learner or expert)."""
+
+    name = "constant"
+    needs_pixels = False
+
+    def __init__(self, action: int, num_envs: int) -> None:
+        self.action, self.num_envs, self.resets = action, num_envs, 0
+
+    def reset(self, seeds, mask=None) -> None:
+        self.resets += 1
+
+    def act(self, step) -> np.ndarray:
+        return np.full(self.num_envs, self.action, np.int32)
+
+
+def _step(n: int) -> Step:
+    return Step(None, {}, np.zeros(n), np.zeros(n, bool), None)
+
+
+@pytest.mark.parametrize("beta, played", [(0.0, 3), (1.0, 5)])
+def test_mixture_plays_learner_or_expert_and_always_labels_with_the_expert(beta, played) -> None:
+    mixture = DaggerMixture(ConstantAgent(3, 4), ConstantAgent(5, 4), 4, beta, "step")
+    mixture.reset(np.arange(4))
+    assert (mixture.act(_step(4)) == played).all()
+    assert (mixture.labels == 5).all() and (mixture.learner_actions == 3).all()
+
+
+def test_mixture_draws_follow_the_episode_seed_and_beta() -> None:
+    n = 2000
+    episode = DaggerMixture(ConstantAgent(3, n), ConstantAgent(5, n), n, 0.3, "episode")
+    episode.reset(np.arange(n))
+    first = episode.act(_step(n))
+    assert ((first == 5).mean() - 0.3) < 0.04  # the expert plays ~beta of the episodes
+    assert (episode.act(_step(n)) == first).all()  # ... for the whole episode
+    again = DaggerMixture(ConstantAgent(3, n), ConstantAgent(5, n), n, 0.3, "episode")
+    again.reset(np.arange(n))
+    assert (again.act(_step(n)) == first).all()  # seeded by the episode seeds alone
+
+    step = DaggerMixture(ConstantAgent(3, 1), ConstantAgent(5, 1), 1, 0.3, "step")
+    step.reset(np.array([7]))
+    share = np.mean([step.act(_step(1))[0] == 5 for _ in range(3000)])
+    assert abs(share - 0.3) < 0.03  # a fresh draw at every step
+
+
+def test_mixture_rejects_bad_arguments() -> None:
+    with pytest.raises(ValueError, match="beta"):
+        DaggerMixture(ConstantAgent(0, 1), ConstantAgent(0, 1), 1, 1.5)
+    with pytest.raises(ValueError, match="mix"):
+        DaggerMixture(ConstantAgent(0, 1), ConstantAgent(0, 1), 1, 0.5, "round")
+
+
+@pytest.fixture(scope="module")
+def learner(tmp_path_factory) -> Path:
+    torch.manual_seed(0)
+    model = CVPTModel(CVPTConfig.from_name("tiny", **SIZES)).eval()
+    return save_exported(model, tmp_path_factory.mktemp("learner") / "cvpt")
+
+
+@pytest.fixture(scope="module")
+def dagger_data(learner: Path, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("dagger") / "r1"
+    argv = ["data", "dagger", "--checkpoint", str(learner), "--beta", "0.25", "--mix", "step",
+            "--round", "2", "--env", "crafter", "--episodes", "2", "--episodes-per-shard", "1",
+            "--max-steps", "60", "--seed", "3", "--num-envs", "2", "--out", str(out),
+            "--no-progress"]
+    assert main(argv) == 0
+    return out
+
+
+def test_dagger_manifest_records_the_round_learner_and_beta(dagger_data, learner) -> None:
+    manifest = json.loads((dagger_data / "manifest.json").read_text())
+    config = manifest["config"]
+    assert config["source"] == "dagger" and config["round"] == 2
+    assert config["beta"] == 0.25 and config["mix"] == "step"
+    assert config["learner_sha256"] == checkpoint_sha256(learner)
+    for entry in manifest["shards"]:
+        assert 0.0 <= entry["dagger"]["learner_agreement"] <= 1.0
+        assert 0.0 < entry["dagger"]["expert_share"] < 0.6  # ~beta of the steps
+
+
+def test_stored_actions_are_the_expert_labels_of_the_visited_states(dagger_data) -> None:
+    """A fresh expert replayed over the stored states gives the stored actions: its labels
+    depend on the states the learner reached, not on the actions the expert would have taken."""
+    episodes = list(iter_episodes(sorted(str(p) for p in dagger_data.glob("*.tar"))))
+    assert len(episodes) == 2
+    played_by_learner = 0
+    for episode in episodes:
+        expert = ScriptedExpert(1)
+        expert.reset(np.array([episode["meta"]["seed"]]))
+        actions = episode["actions"][:-1]  # the final observation has no action
+        for t, label in enumerate(actions):
+            state = {k: v[t : t + 1] for k, v in episode["state"].items()}
+            assert expert.act(Step(None, state, np.zeros(1), np.zeros(1, bool), None))[0] == label
+        moved = episode["state"]["player_pos"][1:] != episode["state"]["player_pos"][:-1]
+        played_by_learner += int(moved.any(-1).sum())
+    assert played_by_learner > 0
+
+
+def test_dagger_rerun_is_identical_and_refuses_another_learner(dagger_data, learner, tmp_path) -> None:
+    shas = {e["file"]: e["sha256"] for e in json.loads((dagger_data / "manifest.json").read_text())["shards"]}
+    out = tmp_path / "again"
+    argv = ["data", "dagger", "--checkpoint", str(learner), "--beta", "0.25", "--mix", "step",
+            "--round", "2", "--env", "crafter", "--episodes", "2", "--episodes-per-shard", "1",
+            "--max-steps", "60", "--seed", "3", "--num-envs", "1", "--out", str(out),
+            "--no-progress"]
+    assert main(argv) == 0
+    again = {e["file"]: e["sha256"] for e in json.loads((out / "manifest.json").read_text())["shards"]}
+    assert again == shas  # the bytes depend on the seed, not on --num-envs
+    argv[argv.index("0.25")] = "0.5"
+    assert main(argv) == 2  # another beta in the same folder is refused
+
+
+def test_dagger_cli_errors_name_the_argument(tmp_path, capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["data", "dagger", "--checkpoint", str(tmp_path / "none"), "--episodes", "1",
+              "--seed", "0", "--out", str(tmp_path / "o")])
+    assert "--checkpoint" in capsys.readouterr().err
