@@ -6,9 +6,13 @@ C-CLIP and the rest share this one entry point.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
+import shutil
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import lightning as L
@@ -70,29 +74,65 @@ class ZooCLI(LightningCLI):
                 init_args.dirpath = str(run_dir / "checkpoints")
 
 
+class DataNotFoundError(FileNotFoundError):
+    """A run's data is missing (a user error: reported in one line, not as a traceback)."""
+
+
+@contextlib.contextmanager
+def _argv_only_the_program() -> Iterator[None]:
+    """LightningCLI warns when it gets ``args`` while ``sys.argv`` holds arguments too (it
+    cannot tell which the user meant); ``zoo`` passes the parsed arguments as ``args``."""
+    saved = sys.argv
+    sys.argv = saved[:1]
+    try:
+        yield
+    finally:
+        sys.argv = saved
+
+
+def _remove_failed_run_dirs(run_dirs: set[Path]) -> None:
+    """A run that failed before saving a checkpoint leaves nothing worth keeping: its folder
+    (config.yaml, an empty W&B run) would only be mistaken for a result."""
+    for run_dir in run_dirs:
+        checkpoints = run_dir / "checkpoints"
+        if run_dir.is_dir() and not (checkpoints.is_dir() and any(checkpoints.iterdir())):
+            shutil.rmtree(run_dir, ignore_errors=True)
+
+
 def run_lightning_cli(argv: list[str]) -> LightningCLI:
     """Run ``zoo fit|validate|test|predict ARGS`` (argv starts with the verb); ``predict``
-    writes its outputs to ``<run dir>/predictions/*.npz``."""
+    writes its outputs to ``<run dir>/predictions/*.npz``.
+
+    A missing data folder raises ``DataNotFoundError``; any failure before the first checkpoint
+    removes the run's folder.
+    """
     predicting = bool(argv) and argv[0] == "predict"
+    given_before = set(_RUN_DIRS_GIVEN)
     try:
-        cli = ZooCLI(
-            L.LightningModule,
-            L.LightningDataModule,
-            subclass_mode_model=True,
-            subclass_mode_data=True,
-            save_config_callback=WandbSaveConfigCallback,
-            save_config_kwargs={"overwrite": True},
-            auto_configure_optimizers=False,
-            trainer_defaults={"callbacks": [NpzPredictionWriter()]} if predicting else None,
-            args=argv,
-            run=True,
-        )
-    except BaseException:
+        with _argv_only_the_program():
+            cli = ZooCLI(
+                L.LightningModule,
+                L.LightningDataModule,
+                subclass_mode_model=True,
+                subclass_mode_data=True,
+                save_config_callback=WandbSaveConfigCallback,
+                save_config_kwargs={"overwrite": True},
+                auto_configure_optimizers=False,
+                trainer_defaults={"callbacks": [NpzPredictionWriter()]} if predicting else None,
+                args=argv,
+                run=True,
+            )
+    except BaseException as err:
         # a run that failed must not stay the active W&B run: the next in-process run (a
         # notebook's retry) would log into it
         wandb = sys.modules.get("wandb")
         if wandb is not None and wandb.run is not None:
-            wandb.finish(exit_code=1)
+            # its footer would point at the folder removed below
+            with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+                wandb.finish(exit_code=1)
+        _remove_failed_run_dirs(_RUN_DIRS_GIVEN - given_before)
+        if isinstance(err, FileNotFoundError) and "manifest.json" in str(err):
+            raise DataNotFoundError(str(err)) from err
         raise
     for logger in cli.trainer.loggers:
         if isinstance(logger, WandbLogger):  # the next in-process run gets its own W&B run

@@ -216,3 +216,29 @@ def test_fit_resumed_from_last_ckpt_ends_like_a_straight_fit(
     torch.testing.assert_close(opt_b["state"], opt_a["state"], rtol=0, atol=0)
     assert opt_b["param_groups"] == opt_a["param_groups"]
     assert b["lr_schedulers"] == a["lr_schedulers"]
+
+
+def test_missing_data_is_one_line_and_leaves_no_run_folder(tmp_path: Path, capsys) -> None:
+    from zoo.cli import main
+
+    missing = tmp_path / "no-data"
+    argv = ["fit", f"--config={CONFIG}", f"--trainer.default_root_dir={tmp_path / 'runs'}",
+            f"--data.init_args.root={missing}", "--trainer.logger=false",
+            "--trainer.enable_progress_bar=false", "--data.init_args.num_workers=0"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("zoo fit: ") and str(missing / "manifest.json") in err[-1]
+    assert "Traceback" not in "\n".join(err)
+    assert not any((tmp_path / "runs").glob("*"))  # the failed run's folder is gone
+
+
+def test_fit_from_the_command_line_gives_no_args_warning(
+    crafterplay: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import warnings
+
+    monkeypatch.setattr("sys.argv", ["zoo", "fit", "--config", str(CONFIG)])  # as `zoo` sees it
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _fit(crafterplay, tmp_path, 1)
+    assert not [w for w in caught if "not recommended to provide both" in str(w.message)]

@@ -57,9 +57,14 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] in TRAIN_VERBS:
-        from lit_models.cli import run_lightning_cli
+        from lit_models.cli import DataNotFoundError, run_lightning_cli
 
-        run_lightning_cli(argv)
+        try:
+            run_lightning_cli(argv)
+        except DataNotFoundError as err:
+            print(f"zoo {argv[0]}: {err} (make it with `zoo data generate`, or point "
+                  "data.init_args.root at one)", file=sys.stderr)
+            return 2
         return 0
     parser = build_parser()
     args = parser.parse_args(argv)
