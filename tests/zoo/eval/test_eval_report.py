@@ -110,3 +110,20 @@ def test_table_lists_scores_and_every_achievement(tmp_path):
     assert float(first[2]) == pytest.approx(report["crafter_score"]["mean"], abs=0.005)
     assert float(first[4]) == pytest.approx(report["crafter_score"]["std"], abs=0.005)
     assert all(name in table for name in ACHIEVEMENT_NAMES)
+
+
+def test_every_report_key_is_documented(tmp_path):
+    """docs/report_json.md is the schema scripts rely on: a key the code writes must be in it."""
+    import re
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parents[3] / "docs" / "report_json.md").read_text()
+    documented = set(re.findall(r"^\| `([a-z_]+)`(?:, `([a-z_]+)`)?", doc, re.M))
+    documented = {key for pair in documented for key in pair if key}
+    meta = {
+        "env": "crafter", "agent": "random", "checkpoint": None, "temperature": 1.0, "seed": 0,
+        "num_envs": 2, "max_steps": 100, "started_at": "t", "finished_at": "t",
+        "wall_seconds": 1.0,
+    }
+    report = write_report(make_results(), tmp_path, meta)
+    assert set(report) - documented == set()
