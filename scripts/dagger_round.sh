@@ -44,12 +44,14 @@ if ! ls "$out"/*/checkpoints/last.ckpt >/dev/null 2>&1; then
         --trainer.default_root_dir "$out" ${FIT_ARGS:-}
     log "training took $(( $(date +%s) - start )) s"
 fi
-best=$(ls -t "$out"/*/checkpoints/best-step*.ckpt | head -1)
-log "best checkpoint $best"
+# the round's weights are the last ones, at the end of the short cosine: the 8-batch
+# validation loss moves less between checkpoints than its own noise
+weights=$(ls -t "$out"/*/checkpoints/last.ckpt | head -1)
+log "weights $weights"
 for env in craftax crafter; do
     if [ ! -f "$out/eval-$env/report.json" ]; then
-        "$zoo" eval --checkpoint "$best" --env "$env" --episodes "${EVAL_EPISODES:-100}" \
+        "$zoo" eval --checkpoint "$weights" --env "$env" --episodes "${EVAL_EPISODES:-100}" \
             --num-envs 20 --out "$out/eval-$env" --no-gif
     fi
 done
-log "done: $best"
+log "done: $weights"

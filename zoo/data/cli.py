@@ -43,6 +43,10 @@ def register(subparsers) -> None:
     )
     gen.add_argument("--expert", required=True, choices=AGENT_NAMES)
     gen.add_argument("--checkpoint", help="expert checkpoint (needed by --expert ppo)")
+    gen.add_argument("--frames", choices=("stored", "rendered"), default="stored",
+                     help="stored: frames as images; rendered (--env craftax only): residuals "
+                     "against re-renders from the stored state, ~1/100 the bytes, re-rendered "
+                     "when read (docs/data.md)")
     _add_play_args(gen)
     gen.set_defaults(handler=_generate, _parser=gen)
 
@@ -107,10 +111,15 @@ def _generate(args) -> int:
         checkpoint = str(Path(args.checkpoint).resolve())
     elif args.expert == "ppo":
         args._parser.error("--expert ppo needs --checkpoint PATH")
+    if args.frames == "rendered" and args.env != "craftax":
+        args._parser.error(
+            f"--frames rendered needs --env craftax (a Craftax frame is a function of the stored "
+            f"state; a {args.env} frame is not), got --env {args.env}; use --frames stored"
+        )
     config = GenerationConfig(
         expert=args.expert, checkpoint=checkpoint, episodes=args.episodes, seed=args.seed,
         env=args.env, episodes_per_shard=args.episodes_per_shard,
-        chunk_length=args.chunk_length, max_steps=args.max_steps,
+        chunk_length=args.chunk_length, max_steps=args.max_steps, frames=args.frames,
     )
     return _run_generation(config, args, "generate")
 

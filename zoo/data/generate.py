@@ -30,6 +30,7 @@ from zoo.data.manifest import (
     save_manifest,
 )
 from zoo.data.noop import noop_counts, noop_flags, noop_runs
+from zoo.data.rerender import renderer_version
 from zoo.data.shards import (
     SHARD_PATTERN,
     ChunkEncoder,
@@ -67,6 +68,10 @@ class GenerationConfig:
         beta: DAgger: probability that the expert acts instead of the learner.
         mix: DAgger: "episode" or "step", what one beta draw decides.
         round: DAgger: the round number, for the record.
+        frames: None (or "stored"): frames coded as images; "rendered" (Craftax only): each
+            frame as its residual against a re-render from the stored state, ~1/100 of the
+            bytes for a re-render at decoding (``zoo.data.rerender``). None, not "stored",
+            is kept so manifests written before this field compare equal.
     """
 
     expert: str
@@ -87,8 +92,18 @@ class GenerationConfig:
     beta: float | None = None
     mix: str | None = None
     round: int | None = None
+    frames: str | None = None
 
     def __post_init__(self) -> None:
+        if self.frames == "stored":
+            object.__setattr__(self, "frames", None)  # frozen; one spelling in the manifest
+        if self.frames not in (None, "rendered"):
+            raise ValueError(f"frames must be 'stored' or 'rendered', got {self.frames!r}")
+        if self.frames == "rendered" and self.env != "craftax":
+            raise ValueError(
+                f"frames='rendered' needs env='craftax' (its frames are a function of the "
+                f"stored state), got env={self.env!r}; use frames='stored'"
+            )
         dagger = (self.learner, self.learner_sha256, self.learner_temperature, self.beta, self.mix)
         if self.source == "dagger" and None in dagger:
             raise ValueError(
@@ -126,7 +141,6 @@ class ShardGenerator:
 
         self.config = config
         self.num_envs = max(1, min(num_envs, config.episodes_per_shard, config.episodes))
-        self.env = make_env(config.env, self.num_envs, pixels=True, max_steps=config.max_steps)
         if config.source == "dagger":
             from zoo.data.dagger import make_dagger_agent
 
@@ -136,7 +150,11 @@ class ShardGenerator:
             )
         else:
             self.agent = make_agent(config.expert, self.num_envs, config.checkpoint)
+        # rendered frames of a state-only expert are drawn once, by the re-render that codes them
+        pixels = config.frames != "rendered" or getattr(self.agent, "needs_pixels", True)
+        self.env = make_env(config.env, self.num_envs, pixels=pixels, max_steps=config.max_steps)
         self.versions = package_versions()
+        self.renderer = renderer_version() if config.frames == "rendered" else None
 
     def run(self, index: int, out: Path, progress: ProgressFn | None = None) -> dict:
         """Play shard ``index``'s episodes, write the shard, return its manifest entry."""
@@ -149,6 +167,8 @@ class ShardGenerator:
         meta = {"env": cfg.env, "expert": cfg.expert}
         if cfg.source is not None:
             meta["source"] = cfg.source
+        if self.renderer is not None:
+            meta["renderer"] = self.renderer
         agreed = np.zeros(self.num_envs, np.int64)  # DAgger: learner's action == the label
         drove = np.zeros(self.num_envs, np.int64)  # DAgger: steps the expert acted
         recorders: list[EpisodeRecorder | None] = [None] * self.num_envs
@@ -163,7 +183,8 @@ class ShardGenerator:
                     return False
                 seeds[slot] = episode_seed(cfg.seed, episode)
                 recorders[slot] = EpisodeRecorder(
-                    episode, int(seeds[slot]), workdir, cfg.chunk_length, meta, encoder, cfg.codec
+                    episode, int(seeds[slot]), workdir, cfg.chunk_length, meta, encoder, cfg.codec,
+                    rendered=self.renderer is not None,
                 )
                 agreed[slot] = drove[slot] = 0
                 return True
@@ -182,11 +203,12 @@ class ShardGenerator:
                     agreed += self.agent.learner_actions == labels
                     drove += self.agent.expert_drove
                 restart = np.zeros(self.num_envs, bool)
+                rngs = self._state_rngs(after)
                 for slot, rec in enumerate(recorders):
                     if rec is None:
                         continue
                     rec.act(int(labels[slot]), float(after.reward[slot]), bool(noop[slot]))
-                    rec.observe(after.frames[slot], index_state(after.state, slot))
+                    rec.observe(_frame(after, slot), index_state(after.state, slot), rngs[slot])
                     frames += 1
                     if after.done[slot]:
                         summaries[rec.episode] = self._summary(rec)
@@ -229,11 +251,20 @@ class ShardGenerator:
         labels = self.agent.labels
         return labels, noop & (labels == actions)
 
-    @staticmethod
-    def _observe(step: Step, recorders: list, mask: np.ndarray) -> None:
+    def _state_rngs(self, step: Step) -> np.ndarray | list[None]:
+        """Per env, Craftax's ``state_rng`` (rendered frames need it), else None. Read now:
+        the env's next call donates the buffers of ``step.raw``."""
+        if self.renderer is None:
+            return [None] * self.num_envs
+        return np.asarray(step.raw.state_rng)
+
+    def _observe(self, step: Step, recorders: list, mask: np.ndarray) -> None:
+        rngs = self._state_rngs(step)
         for slot in np.flatnonzero(mask):
             if recorders[slot] is not None:
-                recorders[slot].observe(step.frames[slot], index_state(step.state, slot))
+                recorders[slot].observe(
+                    _frame(step, slot), index_state(step.state, slot), rngs[slot]
+                )
 
     def _summary(self, rec: EpisodeRecorder) -> dict:
         """Finish the episode and keep what the manifest reports about it."""
@@ -258,6 +289,8 @@ class ShardGenerator:
         noop["min_run"] = cfg.min_noop_run
         unlocks = np.sum([e["achievements"] for e in episodes], axis=0)
         extra = {}
+        if self.renderer is not None:
+            extra["renderer"] = self.renderer
         if cfg.source == "dagger":
             steps = sum(e["length"] for e in episodes)
             extra["dagger"] = {
@@ -284,6 +317,11 @@ class ShardGenerator:
             "noop": noop,
             "achievement_unlocks": dict(zip(ACHIEVEMENT_NAMES, map(int, unlocks))),
         }
+
+
+def _frame(step: Step, slot: int) -> np.ndarray | None:
+    """Env ``slot``'s frame, or None when the env draws none (rendered frames, state-only expert)."""
+    return None if step.frames is None else step.frames[slot]
 
 
 # --- running many shards -------------------------------------------------------------

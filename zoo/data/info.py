@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from zoo.data.manifest import MANIFEST, load_manifest
-from zoo.data.shards import FRAMES, sha256_file
+from zoo.data.shards import FRAMES, RENDER, RESIDUAL, sha256_file
 from zoo.envs.constants import ACHIEVEMENT_NAMES
 from zoo.envs.schema import FRAME_SHAPE
 
@@ -42,10 +42,13 @@ def check_shards(root: Path, manifest: dict) -> ShardCheck:
     return result
 
 
+FRAME_MEMBERS = tuple("." + name for name in (FRAMES, RESIDUAL, RENDER))
+
+
 def _frame_bytes(path: Path) -> int:
-    """Bytes of the compressed frame members of one shard (from tar headers only)."""
+    """Bytes of the members that code frames, in either mode (from tar headers only)."""
     with tarfile.open(path) as tar:
-        return sum(m.size for m in tar.getmembers() if m.name.endswith("." + FRAMES))
+        return sum(m.size for m in tar.getmembers() if m.name.endswith(FRAME_MEMBERS))
 
 
 def dataset_info(root: str | Path, skip_corrupt: bool = False) -> dict:
@@ -68,6 +71,8 @@ def dataset_info(root: str | Path, skip_corrupt: bool = False) -> dict:
         "root": str(root),
         "ok": not check.bad or skip_corrupt,
         "config": manifest["config"],
+        "frames_mode": manifest["config"].get("frames") or "stored",
+        "renderers": sorted({e["renderer"] for e in shards if "renderer" in e}),
         "shards": len(shards),
         "bad_shards": [{"file": f, "why": why} for f, why in check.bad],
         "skipped_shards": len(check.bad) if skip_corrupt else 0,
@@ -88,10 +93,11 @@ def dataset_info(root: str | Path, skip_corrupt: bool = False) -> dict:
 def format_info(info: dict) -> str:
     """Human-readable report of ``dataset_info``."""
     cfg = info["config"]
+    mode = "".join([info["frames_mode"], *(f"; re-rendered with {r}" for r in info["renderers"])])
     lines = [
         f"CrafterPlay {info['root']}: expert={cfg['expert']} env={cfg['env']} seed={cfg['seed']}",
         f"shards {info['shards']}  episodes {info['episodes']}  steps {info['steps']}  "
-        f"frames {info['frames']}",
+        f"frames {info['frames']}  ({mode})",
         f"bytes {info['bytes']:,}  ({info['bytes_per_frame']:.0f} B/frame in all, "
         f"{info['frame_bytes_per_frame']:.0f} B/frame for frames: "
         f"{info['compression_ratio_frames']:.1f}x smaller than raw {RAW_FRAME_BYTES:,} B)",

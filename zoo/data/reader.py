@@ -2,7 +2,9 @@
 
 A sample decodes to a *chunk* of one episode (see docs/data.md). ``iter_chunks`` also checks
 that every shard holds whole episodes in order, so a truncated shard is caught even when it
-was cut exactly between tar members; the error names the shard file.
+was cut exactly between tar members; the error names the shard file. Both frame modes read
+alike: a rendered chunk (RESIDUAL member in place of FRAMES) re-renders its states and adds
+the residual (``zoo.data.rerender``), so its chunk equals the stored mode's.
 """
 
 from __future__ import annotations
@@ -18,11 +20,13 @@ import webdataset as wds
 from zoo.data.codec import decode_arrays, decode_frames
 from zoo.data.manifest import MANIFEST, load_manifest
 from zoo.data.noop import filter_noops
-from zoo.data.shards import FRAMES, META, STATE, STEPS
+from zoo.data.rerender import decode_rendered
+from zoo.data.shards import FRAMES, META, RENDER, RESIDUAL, STATE, STEPS
 from zoo.envs.schema import validate_state
 
 STEP_ARRAYS = {"actions": np.int64, "rewards": np.float32, "noop": np.bool_, "noop_run": np.int32}
 META_FIELDS = ("episode", "seed", "offset", "length", "episode_length", "last", "env", "expert")
+RENDERED_META_FIELDS = ("renderer", "frames_crc32")
 
 
 class CorruptShardError(RuntimeError):
@@ -56,19 +60,21 @@ def _where(sample: dict) -> str:
 def decode_sample(sample: dict) -> dict:
     """Raw WebDataset sample (bytes per member) -> chunk dict; errors name shard and key."""
     where = _where(sample)
-    missing = [name for name in (FRAMES, STATE, STEPS, META) if name not in sample]
+    rendered = RESIDUAL in sample
+    expected = [RESIDUAL, RENDER] if rendered else [FRAMES]
+    expected += [STATE, STEPS, META]
+    missing = [name for name in expected if name not in sample]
     if missing:
-        expected = [FRAMES, STATE, STEPS, META]
         raise ValueError(f"{where}: missing fields {missing}; expected {expected}")
     try:
         meta = json.loads(sample[META])
-        lacking = [k for k in META_FIELDS if k not in meta]
+        required = META_FIELDS + (RENDERED_META_FIELDS if rendered else ())
+        lacking = [k for k in required if k not in meta]
         if lacking:
             raise ValueError(f"meta lacks {lacking}")
         n = int(meta["length"])
         steps = decode_arrays(sample[STEPS], "steps")
         state = decode_arrays(sample[STATE], "state")
-        frames = decode_frames(sample[FRAMES], n)
         for name, dtype in STEP_ARRAYS.items():
             if name not in steps:
                 raise ValueError(f"steps lacks {name!r}")
@@ -78,6 +84,13 @@ def decode_sample(sample: dict) -> dict:
                     f"expected {np.dtype(dtype)} ({n},)"
                 )
         validate_state(state, n)
+        if rendered:  # JAX is imported when the first rendered chunk is met
+            frames = decode_rendered(
+                sample[RESIDUAL], sample[RENDER], state, n, int(meta["frames_crc32"]),
+                meta["renderer"],
+            )
+        else:
+            frames = decode_frames(sample[FRAMES], n)
     except ValueError as err:
         raise ValueError(f"{where}: {err}") from err
     return {**{k: steps[k] for k in STEP_ARRAYS}, "frames": frames, "state": state, "meta": meta}

@@ -5,7 +5,8 @@ spool file as soon as it is full. Chunk metadata (``episode_length``, ``last``) 
 runs are only known when the episode ends, so samples are assembled then, into one tar
 fragment per episode; the shard is those fragments in episode order plus the tar trailer.
 Every tar header is fixed (mtime 0, uid 0, mode 644) so a shard's bytes depend on its
-content alone.
+content alone. A chunk stores its frames as images (FRAMES) or, in the ``rendered`` mode, as
+residuals against re-renders from its states (RESIDUAL + RENDER, see ``zoo.data.rerender``).
 """
 
 from __future__ import annotations
@@ -22,10 +23,12 @@ import numpy as np
 
 from zoo.data.codec import FrameCodec, encode_arrays, encode_frames, encode_json
 from zoo.data.noop import noop_runs
+from zoo.data.rerender import encode_rendered
 from zoo.envs.schema import FRAME_SHAPE, STATE_FIELDS, State
 
 SHARD_PATTERN = "crafterplay-{index:06d}.tar"
 FRAMES, STATE, STEPS, META = "frames.zst", "state.zst", "steps.zst", "meta.json"
+RESIDUAL, RENDER = "residual.zst", "render.zst"  # rendered chunks: in place of FRAMES
 _BLOCK = tarfile.BLOCKSIZE
 
 
@@ -59,14 +62,21 @@ def sha256_file(path: str | Path) -> str:
 
 
 def _spool_chunk(
-    path: Path, frames: np.ndarray, state: State, codec: FrameCodec
-) -> tuple[int, int, int]:
-    """Compress one chunk and append it to the spool; returns (offset, frame bytes, state bytes)."""
-    frame_bytes, state_bytes = encode_frames(frames, codec), encode_arrays(state, codec)
+    path: Path, frames: np.ndarray, state: State, state_rng: np.ndarray | None,
+    codec: FrameCodec,
+) -> tuple[int, list[tuple[str, int]], dict]:
+    """Compress one chunk and append it to the spool; returns (offset, [(member, bytes)], the
+    chunk's extra meta). With ``state_rng`` the frames become residuals against re-renders."""
+    if state_rng is None:
+        members, meta = {FRAMES: encode_frames(frames, codec)}, {}
+    else:
+        residual, inputs, crc32 = encode_rendered(frames, state, state_rng, codec)
+        members, meta = {RESIDUAL: residual, RENDER: inputs}, {"frames_crc32": crc32}
+    members[STATE] = encode_arrays(state, codec)
     with open(path, "ab") as f:
         offset = f.tell()
-        f.write(frame_bytes + state_bytes)
-    return offset, len(frame_bytes), len(state_bytes)
+        f.write(b"".join(members.values()))
+    return offset, [(name, len(data)) for name, data in members.items()], meta
 
 
 class ChunkEncoder(ThreadPoolExecutor):
@@ -98,6 +108,8 @@ class EpisodeRecorder:
         meta: fields copied into every chunk's meta (env, expert).
         encoder: a single-thread executor that compresses chunks and writes the fragment in
             order (it overlaps with env stepping).
+        rendered: keep each step's Craftax ``state_rng`` and store frames as residuals against
+            re-renders from the state (``meta`` should name the renderer version).
     """
 
     def __init__(
@@ -109,6 +121,7 @@ class EpisodeRecorder:
         meta: dict,
         encoder: Executor,
         codec: FrameCodec,
+        rendered: bool = False,
     ) -> None:
         self.episode, self.seed, self.meta = episode, seed, meta
         self.chunk_length, self.encoder, self.codec = chunk_length, encoder, codec
@@ -119,6 +132,8 @@ class EpisodeRecorder:
         self._state = {
             k: np.empty((chunk_length, *f.shape), f.dtype) for k, f in STATE_FIELDS.items()
         }
+        self._rng = np.empty((chunk_length, 2), np.uint32) if rendered else None
+        self._drawn = True
         self._fill = 0
         self._chunks: list[Future] = []
         self.actions: list[int] = []
@@ -127,9 +142,21 @@ class EpisodeRecorder:
         self.sleeping: list[bool] = []  # per observation, for the manifest's filtered noop ratio
         self.final_state: State | None = None
 
-    def observe(self, frame: np.ndarray, state: State) -> None:
-        """Add the observation at which the next action is taken (or the final one)."""
-        self._frames[self._fill] = frame
+    def observe(
+        self, frame: np.ndarray | None, state: State, state_rng: np.ndarray | None = None
+    ) -> None:
+        """Add the observation at which the next action is taken (or the final one);
+        ``state_rng`` (Craftax's key of that state) is needed by rendered recorders, which
+        also take ``frame`` None when the env drew none (the frame is then the re-render)."""
+        if self._rng is not None:
+            if state_rng is None:
+                raise ValueError(f"episode {self.episode}: a rendered recorder needs state_rng")
+            self._rng[self._fill] = state_rng
+        if frame is None and self._rng is None:
+            raise ValueError(f"episode {self.episode}: a stored-frames recorder needs the frame")
+        self._drawn = frame is not None  # rendered recorders may get None: frame = re-render
+        if self._drawn:
+            self._frames[self._fill] = frame
         for k, v in state.items():
             self._state[k][self._fill] = v
         self._fill += 1
@@ -146,8 +173,10 @@ class EpisodeRecorder:
 
     def _flush(self) -> None:
         n = self._fill
-        frames, state = self._frames[:n].copy(), {k: v[:n].copy() for k, v in self._state.items()}
-        job = self.encoder.submit(_spool_chunk, self.spool, frames, state, self.codec)
+        frames = self._frames[:n].copy() if self._drawn else None
+        state = {k: v[:n].copy() for k, v in self._state.items()}
+        rng = None if self._rng is None else self._rng[:n].copy()
+        job = self.encoder.submit(_spool_chunk, self.spool, frames, state, rng, self.codec)
         self._chunks.append(job)
         self._fill = 0
 
@@ -169,18 +198,19 @@ class EpisodeRecorder:
         length = len(steps["actions"])
         spans = [future.result() for future in self._chunks]  # done: same single thread
         with open(self.spool, "rb") as spool, open(self.fragment, "wb") as out:
-            for k, (offset, n_frames, n_state) in enumerate(spans):
+            for k, (offset, members, extra) in enumerate(spans):
                 start = k * self.chunk_length
                 stop = min(start + self.chunk_length, length)
                 spool.seek(offset)
                 key = sample_key(self.episode, start)
                 meta = {
-                    **self.meta,
+                    **self.meta, **extra,
                     "episode": self.episode, "seed": self.seed, "offset": start,
                     "length": stop - start, "episode_length": length, "last": stop == length,
                 }
-                out.write(tar_member(f"{key}.{FRAMES}", spool.read(n_frames)))
-                out.write(tar_member(f"{key}.{STATE}", spool.read(n_state)))
+                out.writelines(
+                    tar_member(f"{key}.{name}", spool.read(size)) for name, size in members
+                )
                 chunk_steps = {name: arr[start:stop] for name, arr in steps.items()}
                 out.write(tar_member(f"{key}.{STEPS}", encode_arrays(chunk_steps, self.codec)))
                 out.write(tar_member(f"{key}.{META}", encode_json(meta)))

@@ -42,6 +42,23 @@ def enable_compilation_cache(path: str | None = None) -> None:
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 
+def frame_renderer():
+    """Craftax's pixel renderer at the zoo's block size, as the uint8 frame the envs return.
+
+    One definition for the env and for frames re-rendered from stored states
+    (``zoo.data.rerender``), so both round and clip alike.
+    """
+    import jax.numpy as jnp
+    from craftax.craftax_classic.renderer import make_craftax_pixel_renderer
+
+    render = make_craftax_pixel_renderer(BLOCK_PIXELS)
+
+    def frame(state):
+        return jnp.clip(jnp.round(render(state)), 0, 255).astype(jnp.uint8)
+
+    return frame
+
+
 def _pad(x, n: int):
     """Pad the entity axis to the schema's maximum (Craftax keeps fewer of some mobs)."""
     import jax.numpy as jnp
@@ -140,19 +157,11 @@ class CraftaxEnv:
         self.pixels = pixels
         self.params = EnvParams(max_timesteps=max_steps)
         self.static_params = StaticEnvParams()
-        render = None
-        if pixels:
-            from craftax.craftax_classic.renderer import make_craftax_pixel_renderer
-
-            render = make_craftax_pixel_renderer(BLOCK_PIXELS)
-
+        render = frame_renderer() if pixels else None
         params, static = self.params, self.static_params
 
         def observe(state):
-            frame = None
-            if render is not None:
-                frame = jnp.clip(jnp.round(render(state)), 0, 255).astype(jnp.uint8)
-            return frame, export_state(state)
+            return None if render is None else render(state), export_state(state)
 
         def strong(state):
             # Weak-typed leaves (player_direction after reset) would make every jitted
