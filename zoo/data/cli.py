@@ -43,10 +43,6 @@ def register(subparsers) -> None:
     )
     gen.add_argument("--expert", required=True, choices=AGENT_NAMES)
     gen.add_argument("--checkpoint", help="expert checkpoint (needed by --expert ppo)")
-    gen.add_argument("--frames", choices=("stored", "rendered"), default="stored",
-                     help="stored: frames as images; rendered (--env craftax only): residuals "
-                     "against re-renders from the stored state, ~1/100 the bytes, re-rendered "
-                     "when read (docs/data.md)")
     _add_play_args(gen)
     gen.set_defaults(handler=_generate, _parser=gen)
 
@@ -98,7 +94,19 @@ def _add_play_args(parser: argparse.ArgumentParser) -> None:
                         help="episode step limit")
     parser.add_argument("--num-envs", type=positive_int, default=8,
                         help="episodes played at once")
+    parser.add_argument("--frames", choices=("stored", "rendered"), default="stored",
+                        help="stored: frames as images; rendered (--env craftax only): residuals "
+                        "against re-renders from the stored state, ~1/100 the bytes, "
+                        "re-rendered when read (docs/data.md)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _check_frames(args) -> None:
+    if args.frames == "rendered" and args.env != "craftax":
+        args._parser.error(
+            f"--frames rendered needs --env craftax (a Craftax frame is a function of the stored "
+            f"state; a {args.env} frame is not), got --env {args.env}; use --frames stored"
+        )
 
 
 def _generate(args) -> int:
@@ -111,11 +119,7 @@ def _generate(args) -> int:
         checkpoint = str(Path(args.checkpoint).resolve())
     elif args.expert == "ppo":
         args._parser.error("--expert ppo needs --checkpoint PATH")
-    if args.frames == "rendered" and args.env != "craftax":
-        args._parser.error(
-            f"--frames rendered needs --env craftax (a Craftax frame is a function of the stored "
-            f"state; a {args.env} frame is not), got --env {args.env}; use --frames stored"
-        )
+    _check_frames(args)
     config = GenerationConfig(
         expert=args.expert, checkpoint=checkpoint, episodes=args.episodes, seed=args.seed,
         env=args.env, episodes_per_shard=args.episodes_per_shard,
@@ -137,12 +141,13 @@ def _dagger(args) -> int:
         args._parser.error(f"--beta must be in [0, 1], got {args.beta}")
     if args.temperature <= 0:
         args._parser.error(f"--temperature must be > 0, got {args.temperature}")
+    _check_frames(args)
     config = GenerationConfig(
         expert=args.expert, episodes=args.episodes, seed=args.seed, env=args.env,
         episodes_per_shard=args.episodes_per_shard, chunk_length=args.chunk_length,
         max_steps=args.max_steps, source="dagger", learner=str(learner.resolve()),
         learner_sha256=checkpoint_sha256(learner), learner_temperature=args.temperature,
-        beta=args.beta, mix=args.mix, round=args.round,
+        beta=args.beta, mix=args.mix, round=args.round, frames=args.frames,
     )
     if args.workers > 1:  # each spawned worker runs the learner: share the cores, not oversubscribe
         os.environ.setdefault("OMP_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // args.workers)))

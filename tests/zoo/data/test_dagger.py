@@ -139,3 +139,11 @@ def test_dagger_cli_errors_name_the_argument(tmp_path, capsys) -> None:
         main(["data", "dagger", "--checkpoint", str(tmp_path / "none"), "--episodes", "1",
               "--seed", "0", "--out", str(tmp_path / "o")])
     assert "--checkpoint" in capsys.readouterr().err
+
+
+def test_dagger_rendered_frames_need_craftax(learner, tmp_path, capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["data", "dagger", "--checkpoint", str(learner), "--episodes", "1", "--seed", "0",
+              "--env", "crafter", "--frames", "rendered", "--out", str(tmp_path / "o")])
+    assert "--frames rendered needs --env craftax" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
