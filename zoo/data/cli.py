@@ -1,4 +1,4 @@
-"""`zoo data generate|dagger|info` (and `zoo data caption` when zoo.captions provides it)."""
+"""`zoo data generate|dagger|merge|info` (and `zoo data caption` when zoo.captions provides it)."""
 
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ def _data_dir(text: str) -> Path:
 
 def register(subparsers) -> None:
     data = subparsers.add_parser(
-        "data", help="datasets: generate, dagger, info, caption, embed (C-Steve-1 goals), prior-pairs"
+        "data", help="datasets: generate, dagger, merge, info, caption, embed (C-Steve-1 goals), prior-pairs"
     )
     data.set_defaults(handler=lambda args: data.print_help() or 2)
     data_sub = data.add_subparsers(dest="data_command", metavar="DATA_COMMAND")
@@ -68,6 +68,17 @@ def register(subparsers) -> None:
     _add_play_args(dagger)
     dagger.set_defaults(handler=_dagger, _parser=dagger)
 
+    merge = data_sub.add_parser(
+        "merge",
+        help="join the shard-range folders of a job array (generate --shards A:B) into one",
+        description="Hard-link (or copy) every shard of the SRC folders into --out and write one "
+        "manifest. Refuses folders made with other generation arguments and shard indices that "
+        "appear twice; checks every shard's sha256; says which shards no folder has yet.",
+    )
+    merge.add_argument("src", nargs="+", type=_data_dir, help="shard-range folders")
+    merge.add_argument("--out", required=True, type=_out_dir, help="the merged dataset folder")
+    merge.set_defaults(handler=_merge)
+
     info = data_sub.add_parser("info", help="counts, noop ratios, unlock rates; verify sha256")
     info.add_argument("dir", type=_data_dir, help="dataset folder")
     info.add_argument("--skip-corrupt", action="store_true",
@@ -98,6 +109,9 @@ def _add_play_args(parser: argparse.ArgumentParser) -> None:
                         help="stored: frames as images; rendered (--env craftax only): residuals "
                         "against re-renders from the stored state, ~1/100 the bytes, "
                         "re-rendered when read (docs/data.md)")
+    parser.add_argument("--shards", type=_shard_range,
+                        help="A:B: write only shards A..B-1 (one task of a job array; join the "
+                        "folders with `zoo data merge`)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -158,8 +172,14 @@ def _run_generation(config, args, command: str) -> int:
     from zoo.data.generate import generate
     from zoo.data.manifest import DatasetMismatchError
 
+    if args.shards is not None and args.shards[0] >= config.num_shards:
+        args._parser.error(
+            f"--shards {args.shards[0]}:{args.shards[1]} holds none of the dataset's shards "
+            f"0:{config.num_shards}"
+        )
     try:
-        manifest = generate(config, args.out, args.workers, args.num_envs, not args.no_progress)
+        manifest = generate(config, args.out, args.workers, args.num_envs, not args.no_progress,
+                            shards=args.shards)
     except DatasetMismatchError as err:
         print(f"zoo data {command}: {err}", file=sys.stderr)
         return 2
@@ -168,10 +188,29 @@ def _run_generation(config, args, command: str) -> int:
         return 130
     steps = sum(e["steps"] for e in manifest["shards"])
     shards = len(manifest["shards"])
-    print(f"{args.out}: {shards} shards, {config.episodes} episodes, {steps} steps")
+    episodes = sum(e["episodes"] for e in manifest["shards"])
+    print(f"{args.out}: {shards} of {config.num_shards} shards, {episodes} episodes, {steps} steps")
     if config.source == "dagger":
         agreement = sum(e["dagger"]["learner_agreement"] * e["steps"] for e in manifest["shards"])
         print(f"learner agreed with the expert's label on {agreement / max(steps, 1):.1%} of steps")
+    return 0
+
+
+def _merge(args) -> int:
+    from zoo.data.generate import merge_datasets
+    from zoo.data.manifest import DatasetMismatchError
+
+    try:
+        manifest = merge_datasets(args.src, args.out)
+    except (DatasetMismatchError, FileNotFoundError, ValueError) as err:
+        print(f"zoo data merge: {err}", file=sys.stderr)
+        return 2
+    steps = sum(e["steps"] for e in manifest["shards"])
+    print(f"{args.out}: {len(manifest['shards'])} shards, {steps} steps")
+    if manifest["missing"]:
+        print(f"zoo data merge: shards {manifest['missing']} are in no folder yet: run their "
+              "--shards jobs and merge again", file=sys.stderr)
+        return 1
     return 0
 
 

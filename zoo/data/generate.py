@@ -23,7 +23,9 @@ import numpy as np
 
 from zoo.data.codec import FrameCodec
 from zoo.data.manifest import (
+    DatasetMismatchError,
     check_same_config,
+    config_diff,
     load_manifest,
     new_manifest,
     package_versions,
@@ -324,6 +326,63 @@ def _frame(step: Step, slot: int) -> np.ndarray | None:
     return None if step.frames is None else step.frames[slot]
 
 
+# --- job arrays: folders of shard ranges joined into one dataset -----------------------
+
+
+def merge_datasets(sources: list[str | Path], out: str | Path) -> dict:
+    """Join CrafterPlay folders of one dataset (``generate --shards A:B`` of a job array) into
+    ``out``: the same generation arguments, no shard index twice, every shard's sha256
+    checked. Shards are hard-linked when ``out`` is on the same filesystem, else copied; the
+    sources are left as they were. Returns the merged manifest (``missing`` lists the shard
+    indices no source had yet: rerun their job, then merge again)."""
+    out = Path(out)
+    if not sources:
+        raise ValueError("nothing to merge: give the shard-range folders")
+    manifests = []
+    for src in map(Path, sources):
+        manifest = load_manifest(src)
+        if manifest is None:
+            raise FileNotFoundError(f"{src / 'manifest.json'} not found: not a CrafterPlay folder")
+        manifests.append((src, manifest))
+    config = manifests[0][1]["config"]
+    owner: dict[int, Path] = {}
+    first = manifests[0][0]
+    for src, manifest in manifests:
+        diff = config_diff(config, manifest["config"], f"in {first}", f"in {src}")
+        if diff:
+            raise DatasetMismatchError(f"cannot merge shards of different datasets: {diff}")
+        for entry in manifest["shards"]:
+            if entry["index"] in owner:
+                raise ValueError(
+                    f"shard {entry['index']} is in both {owner[entry['index']]} and {src}: "
+                    "overlapping --shards ranges"
+                )
+            owner[entry["index"]] = src
+            if sha256_file(src / entry["file"]) != entry["sha256"]:
+                raise ValueError(f"{src / entry['file']}: sha256 differs from its manifest")
+    existing = load_manifest(out)
+    if existing is not None:
+        check_same_config(existing, config, out)
+        taken = {e["index"] for e in existing["shards"]} & set(owner)
+        if taken:
+            raise ValueError(f"{out} already holds shards {sorted(taken)}")
+    merged = existing or new_manifest(config)
+    out.mkdir(parents=True, exist_ok=True)
+    for src, manifest in manifests:
+        for entry in manifest["shards"]:
+            target = out / entry["file"]
+            target.unlink(missing_ok=True)
+            try:
+                os.link(src / entry["file"], target)
+            except OSError:
+                shutil.copyfile(src / entry["file"], target)
+            merged["shards"].append(entry)
+    save_manifest(out, merged)
+    have = {e["index"] for e in merged["shards"]}
+    total = GenerationConfig(**config).num_shards
+    return {**merged, "missing": [i for i in range(total) if i not in have]}
+
+
 # --- running many shards -------------------------------------------------------------
 
 
@@ -375,12 +434,15 @@ def generate(
     progress: bool = True,
     after_shard: Callable[[dict], None] | None = None,
     generator: ShardGenerator | None = None,
+    shards: tuple[int, int] | None = None,
 ) -> dict:
     """Write (or finish) the dataset ``config`` in ``out``; returns the final manifest.
 
     ``after_shard`` is called with each new manifest entry once it is saved. ``generator``
     reuses an already built env and agent (JAX compiles once) for in-process runs. A worker
     process that raises or dies ends the run with a WorkerError naming its shard.
+    ``shards`` (start, stop) writes only shard indices in [start, stop): one task of a job
+    array, its folder joined with the others' by ``merge_datasets``.
     """
     if generator is not None and generator.config != config:
         raise ValueError("generator was built for another GenerationConfig")
@@ -397,10 +459,17 @@ def generate(
     _remove_leftovers(out)
     save_manifest(out, manifest)
     done = {e["index"] for e in manifest["shards"]}
-    todo = [i for i in range(config.num_shards) if i not in done]
+    start, stop = shards or (0, config.num_shards)
+    wanted = range(start, min(stop, config.num_shards))
+    if not wanted:
+        raise ValueError(
+            f"--shards {start}:{stop} holds none of the dataset's shards 0:{config.num_shards}"
+        )
+    todo = [i for i in wanted if i not in done]
 
     bar = tqdm(
-        total=config.episodes, initial=sum(e["episodes"] for e in manifest["shards"]),
+        total=sum(len(config.shard_episodes(i)) for i in wanted),
+        initial=sum(e["episodes"] for e in manifest["shards"] if e["index"] in wanted),
         unit="ep", desc=f"crafterplay {out.name}", disable=not progress, dynamic_ncols=True,
     )
     frames_done = 0

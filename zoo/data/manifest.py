@@ -66,13 +66,20 @@ def save_manifest(root: str | Path, manifest: dict) -> None:
     os.replace(tmp, path)
 
 
+def config_diff(stored: dict, config: dict, here: str = "there", there: str = "now") -> str:
+    """The generation arguments that differ, as "key: a here vs b there, ..." ("" if none);
+    a key one side lacks counts as None (fields added later keep old manifests equal)."""
+    keys = sorted(set(stored) | set(config))
+    return ", ".join(
+        f"{k}: {stored.get(k)!r} {here} vs {config.get(k)!r} {there}"
+        for k in keys if stored.get(k) != config.get(k)
+    )
+
+
 def check_same_config(manifest: dict, config: dict, root: str | Path) -> None:
     """Refuse to mix datasets: the stored generation arguments must equal the new ones."""
-    stored = manifest.get("config", {})
-    diff = {k: (stored.get(k), config.get(k)) for k in sorted(set(stored) | set(config))
-            if stored.get(k) != config.get(k)}
-    if diff:
-        lines = ", ".join(f"{k}: {old!r} there vs {new!r} now" for k, (old, new) in diff.items())
+    lines = config_diff(manifest.get("config", {}), config)
+    if lines:
         raise DatasetMismatchError(
             f"{Path(root)} already holds CrafterPlay data generated with other arguments "
             f"({lines}); use another --out folder or the original arguments to resume"
