@@ -147,3 +147,10 @@ def test_dagger_rendered_frames_need_craftax(learner, tmp_path, capsys) -> None:
               "--env", "crafter", "--frames", "rendered", "--out", str(tmp_path / "o")])
     assert "--frames rendered needs --env craftax" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_dagger_shard_range_outside_the_dataset_is_named(learner, tmp_path, capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["data", "dagger", "--checkpoint", str(learner), "--episodes", "2", "--seed", "0",
+              "--episodes-per-shard", "1", "--shards", "5:6", "--out", str(tmp_path / "o")])
+    assert "holds none of the dataset's shards 0:2" in capsys.readouterr().err
