@@ -23,6 +23,7 @@ TOP_LEVEL = (
     ("zoo.export_cli", "register"),
     ("zoo.demo", "register"),
     ("zoo.agents.play", "register"),
+    ("zoo.rl.cli", "register"),
 )
 
 

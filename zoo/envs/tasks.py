@@ -267,6 +267,8 @@ class TaskEnv:
     ``progress`` tracks each env's ordered sub-tasks; with ``end_on_success`` an env reports
     ``done`` on the step its last sub-task completes (the episode has nothing left to score).
     ``seeds[i]`` is the seed env i was last reset with, so results can be matched to slots.
+    ``completed[i]`` says whether env i's last step completed its current sub-task (the
+    sparse, ordered task reward of the RL agents).
     The step limit is the wrapped env's own; ``make_task_env`` builds one with the task's.
     """
 
@@ -282,6 +284,7 @@ class TaskEnv:
         self.end_on_success = end_on_success
         self.progress = TaskProgress(task, env.num_envs)
         self.seeds = np.zeros(env.num_envs, np.int64)
+        self.completed = np.zeros(env.num_envs, bool)
         self._last: Step | None = None
 
     @property
@@ -308,7 +311,7 @@ class TaskEnv:
         step = _writable(self.env.step(actions))
         if self.task.peaceful:
             self._editor.edit(step, np.ones(self.num_envs, bool), inventory=False)
-        self.progress.update(step.state)
+        self.completed = self.progress.update(step.state)
         if self.end_on_success:
             step.done = step.done | self.progress.success
         self._last = step

@@ -145,24 +145,24 @@ class SteveModel(nn.Module):
         doubled batch (B conditional, then B unconditional rows) for TrXL-input conditioning:
         ``guidance_state`` makes the right one.
         """
-        uncond_goal = torch.zeros_like(goal)
         if self.config.conditioning == "head":
-            hidden, state = self.backbone.trxl(
-                self.backbone.encode_frames(frames), first.bool(), state
-            )
-            both = torch.cat(
-                [
-                    hidden + self._goal_term(goal, hidden),
-                    hidden + self._goal_term(uncond_goal, hidden),
-                ]
-            )
-        else:
-            x = self.backbone.encode_frames(frames)
-            x = torch.cat([x + self._goal_term(goal, x), x + self._goal_term(uncond_goal, x)])
-            hidden, state = self.backbone.trxl(x, torch.cat([first, first]).bool(), state)
-            both = hidden
-        cond, uncond = self.backbone.policy_head(both).chunk(2)
+            hidden, state = self.backbone.features(frames, first, state)
+            return self.guided_head(hidden, goal, scale), state
+        x = self.backbone.encode_frames(frames)
+        x = torch.cat([x + self._goal_term(goal, x), x + self._goal_term(torch.zeros_like(goal), x)])
+        hidden, state = self.backbone.trxl(x, torch.cat([first, first]).bool(), state)
+        cond, uncond = self.backbone.policy_head(hidden).chunk(2)
         return combine_guidance(cond, uncond, scale), state
+
+    def guided_head(self, hidden: torch.Tensor, goal: torch.Tensor, scale: float) -> torch.Tensor:
+        """Guided logits (B, T, A) from goal-free TrXL features (B, T, d) and goals (B, T, D)
+        (head conditioning): the goal only enters here, so a caller that needs the features
+        too (PPO-Steve's planner) runs the Transformer-XL once."""
+        if self.config.conditioning != "head":
+            raise ValueError("guided_head needs head conditioning; use guided_logits")
+        cond = self.backbone.policy_head(hidden + self._goal_term(goal, hidden))
+        uncond = self.backbone.policy_head(hidden + self._goal_term(torch.zeros_like(goal), hidden))
+        return combine_guidance(cond, uncond, scale)
 
     def guidance_state(self, batch: int, device: torch.device | str | None = None) -> TrXLState:
         """Empty TrXL memory for ``guided_logits`` on ``batch`` envs."""

@@ -9,11 +9,11 @@ and the file, so a config on disk is always the complete record of a run.
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
+from zoo.strict_config import dataclass_from_dict, dataclass_from_yaml
 
 
 @dataclass(frozen=True)
@@ -130,50 +130,8 @@ class PPOConfig:
     @classmethod
     def from_dict(cls, values: dict[str, Any], source: str = "<dict>") -> PPOConfig:
         """Build from a complete mapping; ``source`` names the file in error messages."""
-        if not isinstance(values, dict):
-            raise ValueError(
-                f"{source}: expected a mapping of PPOConfig fields, got {type(values).__name__}"
-            )
-        known = {f.name: f for f in fields(cls)}
-        unknown = sorted(set(values) - set(known))
-        if unknown:
-            raise ValueError(
-                f"{source}: unknown key(s) {unknown}; PPOConfig fields are {sorted(known)}"
-            )
-        missing = sorted(set(known) - set(values))
-        if missing:
-            raise ValueError(
-                f"{source}: missing key(s) {missing}; every PPOConfig field must be set"
-            )
-        return cls(
-            **{name: _coerce(values[name], known[name].type, name, source) for name in known}
-        )
+        return dataclass_from_dict(cls, values, source)
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> PPOConfig:
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"PPO config file not found: {path}")
-        with path.open() as f:
-            values = yaml.safe_load(f)
-        return cls.from_dict(values if values is not None else {}, source=str(path))
-
-
-def _coerce(value: Any, kind: str, name: str, source: str) -> Any:
-    """Check a YAML value against the field type; accept '1e9'-style numbers (YAML 1.1 reads
-    exponent notation without a dot as a string) where they are exact."""
-    expected = {"int": int, "float": float, "bool": bool}[kind]
-    if expected is bool:
-        if isinstance(value, bool):
-            return value
-    elif not isinstance(value, bool):
-        try:
-            number = float(value) if isinstance(value, str) else value
-            if isinstance(number, (int, float)):
-                if expected is float:
-                    return float(number)
-                if float(number).is_integer():
-                    return int(number)
-        except ValueError:
-            pass
-    raise ValueError(f"{source}: {name} must be {kind}, got {value!r} ({type(value).__name__})")
+        return dataclass_from_yaml(cls, path)

@@ -1,0 +1,39 @@
+"""Build the env PPO steps and the network it trains for each agent of ``RLConfig``."""
+
+from __future__ import annotations
+
+from torch import nn
+
+from zoo.envs.constants import NUM_ACTIONS
+from zoo.rl.config import RLConfig
+from zoo.rl.envs import PlannerEnv, TaskVecEnv
+from zoo.rl.policies import CVPTRLPolicy, FrameEncoder, RecurrentActorCritic
+
+FRAME_SIZE = 144
+
+
+def build_agent(config: RLConfig, next_episode: int = 0, sampling_seed: int = 0):
+    """(env, policy) for ``config``; episodes are numbered from ``next_episode`` (a resume),
+    and PPO-Steve's executor samples its actions from ``sampling_seed``."""
+    tasks = TaskVecEnv.make(config.task, config.env, config.num_envs, config.seed, next_episode)
+    hidden = config.hidden_size
+    if config.agent == "ppo_rnn":
+        encoder = FrameEncoder(FRAME_SIZE, config.input_downsample, hidden)
+        return tasks, RecurrentActorCritic(encoder, hidden, hidden, NUM_ACTIONS).to(config.device)
+    if config.agent == "cvpt_rl":
+        from zoo.export import load_policy_model
+
+        model = load_policy_model(config.checkpoint)
+        policy = CVPTRLPolicy(model, config.lora_rank, config.lora_alpha)
+        return tasks, policy.to(config.device)
+    from zoo.agents.steve_agent import GoalEncoder, StevePolicy
+    from zoo.captions.vocabulary import load_vocabulary
+
+    steve = StevePolicy.load(config.checkpoint, config.device, cfg_scale=config.cfg_scale)
+    encoder = GoalEncoder.load(config.cclip, config.prior, sample_prior=False)
+    goals = encoder.from_caption_ids(list(range(len(load_vocabulary().texts()))))
+    env = PlannerEnv(tasks, steve, goals, config.option_steps, sampling_seed)
+    planner_input = nn.Sequential(nn.Linear(env.obs_dim, hidden), nn.ReLU())
+    return env, RecurrentActorCritic(planner_input, hidden, hidden, env.num_actions).to(
+        config.device
+    )

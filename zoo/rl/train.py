@@ -1,0 +1,280 @@
+"""The PPO loop shared by the three agents: rollout, GAE, clipped updates, logs, checkpoints.
+
+A run directory holds ``config.yaml``, ``metrics.csv`` (one row per update), optional W&B
+files, and ``checkpoints/update_*.pt`` with the trainable parameters, the optimizer, the
+update and env-step counts, the episode counter and the sampling generator: ``--resume``
+continues at the same env step with the same optimizer state (``total_env_steps`` may grow,
+to extend a run; every other setting must match). Episodes in flight at the
+checkpoint are dropped (not counted); the resumed run starts fresh episodes with the next
+episode seeds.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import yaml
+
+from zoo.rl.agents import build_agent
+from zoo.rl.config import RLConfig
+from zoo.rl.policies import count_parameters
+from zoo.rl.ppo import explained_variance, gae, ppo_loss
+
+COLUMNS = (
+    "update", "env_steps", "episodes", "success_rate", "success_rate_100", "subtasks_100",
+    "episode_length_100", "policy_loss", "value_loss", "entropy", "kl_ref", "approx_kl",
+    "clip_fraction", "explained_variance", "lr", "env_steps_per_s", "env_share", "model_share",
+    "update_share", "wall_seconds",
+)
+KEEP_CHECKPOINTS = 2
+
+
+def list_checkpoints(out: Path) -> list[Path]:
+    return sorted((out / "checkpoints").glob("update_*.pt"))
+
+
+class Rollout:
+    """Stored steps of one update, (N, T, ...) once stacked."""
+
+    def __init__(self) -> None:
+        self.columns: dict[str, list[torch.Tensor]] = {}
+
+    def add(self, **values: torch.Tensor | None) -> None:
+        for key, value in values.items():
+            if value is not None:
+                self.columns.setdefault(key, []).append(value)
+
+    def stack(self) -> dict[str, torch.Tensor]:
+        return {k: torch.stack(v, 1) for k, v in self.columns.items()}
+
+
+def sample(logits: torch.Tensor, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+    """Actions (N,) drawn from softmax(logits) and their log-probabilities."""
+    logp = torch.log_softmax(logits.float(), -1).cpu()
+    actions = torch.multinomial(logp.exp(), 1, generator=generator)[:, 0]
+    return actions, logp.gather(1, actions[:, None])[:, 0]
+
+
+def train_rl(
+    config: RLConfig,
+    out_dir: str | Path,
+    resume: bool = False,
+    use_wandb: bool = False,
+    progress: bool = True,
+) -> dict[str, Any] | None:
+    """Train (or resume) one RL agent into ``out_dir``; returns the last update's record."""
+    out = Path(out_dir)
+    found = list_checkpoints(out)
+    if found and not resume:
+        raise FileExistsError(
+            f"{out} already holds checkpoints ({found[-1].name}); pass --resume to continue "
+            "that run or choose another --out"
+        )
+    saved = torch.load(found[-1], map_location="cpu", weights_only=False) if resume and found else None
+    if saved is not None:  # a resume may extend the run, nothing else
+        diff = sorted(k for k, v in config.to_dict().items()
+                      if saved["config"].get(k) != v and k != "total_env_steps")
+        if diff:
+            raise ValueError(f"{found[-1]} was trained with other settings: {diff} differ")
+    start = saved["update"] if saved else 0
+    torch.manual_seed(config.seed)
+    env, policy = build_agent(
+        config, saved["next_episode"] if saved else 0, sampling_seed=config.seed * 1_000_003 + start
+    )
+    params = [p for p in policy.parameters() if p.requires_grad]
+    optimizer = torch.optim.Adam(params, lr=config.lr, eps=1e-5)
+    generator = torch.Generator().manual_seed(config.seed)
+    env_steps, wall, episodes = 0, 0.0, 0
+    if saved:
+        missing = policy.load_state_dict(saved["trainable"], strict=False).unexpected_keys
+        if missing:
+            raise ValueError(f"{found[-1]}: parameters {missing[:5]} are not in this agent")
+        optimizer.load_state_dict(saved["optimizer"])
+        generator.set_state(saved["generator"])
+        env_steps, wall, episodes = saved["env_steps"], saved["wall_seconds"], saved["episodes"]
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.yaml").write_text(yaml.safe_dump(config.to_dict(), sort_keys=False))
+    trainable, total = count_parameters(policy)
+    print(f"zoo rl: {config.agent} on {config.task} ({config.env}), {trainable:,} of {total:,} "
+          f"parameters trained ({100 * trainable / total:.1f}%), updates {start}..{config.num_updates}")
+    wandb_run = _start_wandb(config, out, start, trainable) if use_wandb else None
+
+    from tqdm import tqdm
+
+    bar = tqdm(total=config.num_updates, initial=start, unit="update", disable=not progress,
+               desc=f"{config.agent} {config.task}")
+    recent: deque = deque(maxlen=100)
+    n = config.num_envs
+    t = env.reset()
+    x, first = policy.preprocess(t.obs), torch.as_tensor(t.first)
+    state = policy.initial_state(n)
+    record = None
+    new_file = not (out / "metrics.csv").exists()
+    with (out / "metrics.csv").open("a", newline="") as f:
+        writer = csv.DictWriter(f, COLUMNS)
+        if new_file:
+            writer.writeheader()
+        for update in range(start, config.num_updates):
+            lr = config.lr * (1 - update / config.num_updates) if config.anneal_lr else config.lr
+            for group in optimizer.param_groups:
+                group["lr"] = lr
+            began = time.perf_counter()
+            env_time = model_time = 0.0
+            finished = []
+            rollout, state0 = Rollout(), state
+            for _ in range(config.num_steps):
+                tick = time.perf_counter()
+                with torch.no_grad():
+                    step = policy.step(x, first, state)
+                actions, logp = sample(step.logits, generator)
+                tock = time.perf_counter()
+                tr = env.step(actions.numpy())
+                env_time += time.perf_counter() - tock - tr.model_seconds
+                model_time += tock - tick + tr.model_seconds
+                rollout.add(
+                    x=x, first=first, action=actions, logp=logp, value=step.value.float().cpu(),
+                    reward=torch.as_tensor(tr.reward), done=torch.as_tensor(tr.done),
+                    ref_logits=None if step.ref_logits is None else step.ref_logits.cpu(),
+                )
+                env_steps += tr.env_steps
+                finished += tr.finished
+                tick = time.perf_counter()
+                state = step.state
+                x, first = policy.preprocess(tr.obs), torch.as_tensor(tr.first)
+                model_time += time.perf_counter() - tick
+            with torch.no_grad():
+                last_value = policy.step(x, first, state).value.float().cpu()
+            data = rollout.stack()
+            advantages, returns = gae(
+                data["reward"], data["value"], data["done"], last_value,
+                config.gamma, config.gae_lambda,
+            )
+            tick = time.perf_counter()
+            losses = _optimize(config, policy, optimizer, params, data, advantages, returns,
+                               state0, generator)
+            update_time = time.perf_counter() - tick
+            seconds = time.perf_counter() - began
+            wall += seconds
+            recent.extend(finished)
+            episodes += len(finished)
+            record = {
+                "update": update + 1,
+                "env_steps": env_steps,
+                "episodes": episodes,
+                "success_rate": _mean([e.success for e in finished]),
+                "success_rate_100": _mean([e.success for e in recent]),
+                "subtasks_100": _mean([e.subtasks_done for e in recent]),
+                "episode_length_100": _mean([e.length for e in recent]),
+                **losses,
+                "explained_variance": explained_variance(data["value"], returns),
+                "lr": lr,
+                "env_steps_per_s": config.env_steps_per_update / seconds,
+                "env_share": env_time / seconds,
+                "model_share": model_time / seconds,
+                "update_share": update_time / seconds,
+                "wall_seconds": wall,
+            }
+            writer.writerow({k: _csv(record[k]) for k in COLUMNS})
+            f.flush()
+            if wandb_run is not None:
+                wandb_run.log({k: v for k, v in record.items() if _finite(v)}, step=env_steps)
+            bar.update(1)
+            bar.set_postfix(success=_fmt(record["success_rate_100"]),
+                            sps=f"{record['env_steps_per_s']:.0f}")
+            if (update + 1) % config.checkpoint_every == 0 or update + 1 == config.num_updates:
+                counts = {"update": update + 1, "env_steps": env_steps, "episodes": episodes,
+                          "next_episode": _next_episode(env), "wall_seconds": wall}
+                _save(out, config, policy, optimizer, generator, counts)
+    bar.close()
+    if wandb_run is not None:
+        wandb_run.finish()
+    return record
+
+
+def _optimize(config, policy, optimizer, params, data, advantages, returns, state0, generator):
+    n = config.num_envs
+    size = n // config.num_minibatches
+    sums: dict[str, float] = {}
+    count = 0
+    for _ in range(config.update_epochs):
+        order = torch.randperm(n, generator=generator)
+        for k in range(config.num_minibatches):
+            idx = order[k * size:(k + 1) * size]
+            logits, values = policy.evaluate(
+                data["x"][idx], data["first"][idx], policy.select_state(state0, idx)
+            )
+            loss = ppo_loss(
+                logits, values.float(), data["action"][idx], data["logp"][idx],
+                data["value"][idx], advantages[idx], returns[idx], config.clip_eps,
+                config.vf_coef, config.ent_coef,
+                data["ref_logits"][idx] if "ref_logits" in data else None, config.kl_coef,
+            )
+            optimizer.zero_grad()
+            loss.total.backward()
+            torch.nn.utils.clip_grad_norm_(params, config.max_grad_norm)
+            optimizer.step()
+            for name in ("policy", "value", "entropy", "kl_ref", "approx_kl", "clip_fraction"):
+                sums[name] = sums.get(name, 0.0) + float(getattr(loss, name).detach())
+            count += 1
+    return {
+        "policy_loss": sums["policy"] / count, "value_loss": sums["value"] / count,
+        "entropy": sums["entropy"] / count, "kl_ref": sums["kl_ref"] / count,
+        "approx_kl": sums["approx_kl"] / count, "clip_fraction": sums["clip_fraction"] / count,
+    }
+
+
+def _next_episode(env) -> int:
+    return (env.tasks if hasattr(env, "tasks") else env).next_episode
+
+
+def _save(out, config, policy, optimizer, generator, counts: dict[str, Any]) -> None:
+    folder = out / "checkpoints"
+    update = counts["update"]
+    folder.mkdir(parents=True, exist_ok=True)
+    trainable = {k: v for k, v in policy.state_dict().items()
+                 if k in {n for n, p in policy.named_parameters() if p.requires_grad}}
+    payload = {
+        "config": config.to_dict(), **counts, "trainable": trainable, "optimizer": optimizer.state_dict(), "generator": generator.get_state(),
+    }
+    tmp = folder / f"update_{update:06d}.pt.tmp"
+    torch.save(payload, tmp)
+    tmp.rename(folder / f"update_{update:06d}.pt")
+    for old in list_checkpoints(out)[:-KEEP_CHECKPOINTS]:
+        old.unlink()
+
+
+def _mean(values: list) -> float:
+    return float(np.mean(values)) if values else math.nan
+
+
+def _finite(value: Any) -> bool:
+    return value is not None and not (isinstance(value, float) and not math.isfinite(value))
+
+
+def _csv(value: Any) -> Any:
+    return "" if not _finite(value) else value
+
+
+def _fmt(value: float) -> str:
+    return "-" if math.isnan(value) else f"{value:.2f}"
+
+
+def _start_wandb(config: RLConfig, out: Path, start: int, trainable: int):
+    import wandb
+
+    return wandb.init(
+        project=os.environ.get("WANDB_PROJECT", "crafter-zoo"),
+        name=out.name,
+        dir=str(out),
+        config=config.to_dict() | {"resumed_from_update": start, "trainable_parameters": trainable},
+        mode=os.environ.get("WANDB_MODE", "offline"),
+        group=f"rl/{config.agent}_{config.task}",
+    )
