@@ -150,6 +150,15 @@ class CrafterPlayDataModule(L.LightningDataModule):
             raise ValueError(f"unknown split {split!r}; expected one of {SPLITS}")
         hp = self.hparams
         train = split == "train"
+        if train and not self.shards.split_episodes(
+            "train", hp.val_fraction, hp.test_fraction, hp.split_salt
+        ):
+            raise ValueError(
+                f"no training episodes in {', '.join(self._roots)}: all "
+                f"{sum(s['episodes'] for s in self.shards.sources)} fall in the val/test split "
+                f"(val_fraction={hp.val_fraction}, test_fraction={hp.test_fraction}); generate "
+                "more episodes or lower the fractions"
+            )
         shuffles: list[EpochSeeded] = []
         stages = [self.shards, wds.split_by_node, wds.split_by_worker]
         if train and len(self._roots) > 1:

@@ -54,6 +54,19 @@ def test_splits_hold_disjoint_episodes_covering_all(crafterplay: Path) -> None:
     assert set.union(*episodes.values()) == set(range(NUM_EPISODES))
 
 
+def test_a_dataset_without_training_episodes_is_an_error_not_an_endless_empty_epoch(
+    crafterplay: Path,
+) -> None:
+    from zoo.data.sequences import episode_split as split_of
+
+    salt = next(s for s in range(1000)  # a salt that puts all 8 episodes out of training
+                if all(split_of(e, 0.45, 0.5, s) != "train" for e in range(NUM_EPISODES)))
+    module = _module(crafterplay, val_fraction=0.45, test_fraction=0.5, split_salt=salt)
+    with pytest.raises(ValueError, match=f"no training episodes in {crafterplay}: all 8"):
+        module.dataset("train")
+    assert _episodes(module, "val") | _episodes(module, "test")  # the other splits still read
+
+
 def test_episode_split_is_deterministic_with_given_fractions() -> None:
     splits = [episode_split(e, 0.1, 0.2) for e in range(20_000)]
     assert splits == [episode_split(e, 0.1, 0.2) for e in range(20_000)]

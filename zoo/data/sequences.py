@@ -52,7 +52,7 @@ class ShardSources(IterableDataset):
             self.sources += [
                 {
                     "url": str(Path(root) / e["file"]), "episodes": int(e["episodes"]),
-                    "index": e["index"], "steps": int(e["steps"]), "source": source,
+                    "first_episode": int(e.get("first_episode", 0)), "index": e["index"], "steps": int(e["steps"]), "source": source,
                     "draw_weight": float(weight) / total,
                 }
                 for e in entries
@@ -60,6 +60,15 @@ class ShardSources(IterableDataset):
 
     def __len__(self) -> int:
         return len(self.sources)
+
+    def split_episodes(self, split: str, val_fraction: float, test_fraction: float,
+                       salt: int) -> int:
+        """How many of the listed episodes fall in ``split`` (``episode_split``)."""
+        return sum(
+            episode_split(e, val_fraction, test_fraction, salt) == split
+            for source in self.sources
+            for e in range(source["first_episode"], source["first_episode"] + source["episodes"])
+        )
 
     def __iter__(self) -> Iterator[dict]:
         return (dict(source) for source in self.sources)
