@@ -7,9 +7,10 @@ value of the wrong type, is an error naming the key and the file. Shared by the 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Self, TypeVar
 
 import yaml
 
@@ -62,3 +63,22 @@ def coerce(value: Any, kind: str, name: str, source: str) -> Any:
         except ValueError:
             pass
     raise ValueError(f"{source}: {name} must be {kind}, got {value!r} ({type(value).__name__})")
+
+
+class StrictConfig:
+    """Mixin of a config dataclass: ``from_yaml``/``from_dict`` (strict), ``to_dict``, ``replace``."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def replace(self, **changes: Any) -> Self:
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any], source: str = "<dict>") -> Self:
+        """Build from a complete mapping; ``source`` names the file in error messages."""
+        return dataclass_from_dict(cls, values, source)
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> Self:
+        return dataclass_from_yaml(cls, path)

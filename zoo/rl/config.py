@@ -7,18 +7,15 @@ defaults unless noted; the paper gives only C-VPT-RL's LoRA (alpha 16, r 16) and
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
 
-from zoo.strict_config import dataclass_from_dict, dataclass_from_yaml
+from zoo.strict_config import StrictConfig
 
 AGENTS = ("ppo_rnn", "cvpt_rl", "ppo_steve")
 
 
 @dataclass(frozen=True)
-class RLConfig:
+class RLConfig(StrictConfig):
     agent: str = "ppo_rnn"
     """``ppo_rnn`` (from scratch, pixels), ``cvpt_rl`` (C-VPT + LoRA + KL) or ``ppo_steve``
     (caption planner over frozen C-Steve-1)."""
@@ -110,17 +107,3 @@ class RLConfig:
     @property
     def num_updates(self) -> int:
         return self.total_env_steps // self.env_steps_per_update
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    def replace(self, **changes: Any) -> RLConfig:
-        return dataclasses.replace(self, **changes)
-
-    @classmethod
-    def from_dict(cls, values: dict[str, Any], source: str = "<dict>") -> RLConfig:
-        return dataclass_from_dict(cls, values, source)
-
-    @classmethod
-    def from_yaml(cls, path: str | Path) -> RLConfig:
-        return dataclass_from_yaml(cls, path)

@@ -8,16 +8,13 @@ and the file, so a config on disk is always the complete record of a run.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
 
-from zoo.strict_config import dataclass_from_dict, dataclass_from_yaml
+from zoo.strict_config import StrictConfig
 
 
 @dataclass(frozen=True)
-class PPOConfig:
+class PPOConfig(StrictConfig):
     """One PPO-RNN run; frozen (hashable) so compiled training functions can be cached by it."""
 
     num_envs: int = 4096
@@ -120,18 +117,3 @@ class PPOConfig:
                 f"PPOConfig.total_timesteps ({self.total_timesteps}) is less than one update "
                 f"(num_envs * num_steps = {self.batch_size})"
             )
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    def replace(self, **changes: Any) -> PPOConfig:
-        return dataclasses.replace(self, **changes)
-
-    @classmethod
-    def from_dict(cls, values: dict[str, Any], source: str = "<dict>") -> PPOConfig:
-        """Build from a complete mapping; ``source`` names the file in error messages."""
-        return dataclass_from_dict(cls, values, source)
-
-    @classmethod
-    def from_yaml(cls, path: str | Path) -> PPOConfig:
-        return dataclass_from_yaml(cls, path)
