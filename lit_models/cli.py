@@ -12,7 +12,6 @@ import os
 import shutil
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import lightning as L
@@ -52,6 +51,10 @@ def _new_run_dir(root: Path) -> Path:
     return run_dir
 
 
+RUN_DIR_ENV = "ZOO_RUN_DIR"  # a run folder chosen by the user: every rank writes there
+_LAUNCHED_RUN_DIR = "_ZOO_LAUNCHED_RUN_DIR"  # rank 0's folder, inherited by ranks it launches
+
+
 class ZooCLI(LightningCLI):
     """Puts each run in its own folder: ``<trainer.default_root_dir>/<time>-<pid>``.
 
@@ -59,9 +62,31 @@ class ZooCLI(LightningCLI):
     so config.yaml, W&B files and checkpoints of one run sit together and never collide.
     """
 
+    def parse_arguments(self, parser, args) -> None:
+        """``zoo`` hands LightningCLI the command line as ``args``; ``sys.argv`` is hidden while
+        parsing only (LightningCLI warns when both are set): DDP's launcher starts the other
+        ranks by running ``sys.argv`` again, so it must hold the real command line."""
+        saved = sys.argv
+        sys.argv = saved[:1]
+        try:
+            super().parse_arguments(parser, args)
+        finally:
+            sys.argv = saved
+
     def before_instantiate_classes(self) -> None:
         config = self.config[self.subcommand] if self.subcommand else self.config
-        run_dir = _new_run_dir(Path(config.trainer.default_root_dir or "runs"))
+        # ZOO_RUN_DIR (set by the user for torchrun/SLURM jobs, whose processes start on their
+        # own) names the folder of every rank; ranks that Lightning's DDP launcher started
+        # (LOCAL_RANK > 0) join the folder their rank 0 chose
+        launched = os.environ.get(_LAUNCHED_RUN_DIR) if int(os.environ.get("LOCAL_RANK", "0")) else None
+        if os.environ.get(RUN_DIR_ENV):
+            run_dir = Path(os.environ[RUN_DIR_ENV])
+            run_dir.mkdir(parents=True, exist_ok=True)
+        elif launched:
+            run_dir = Path(launched)
+        else:
+            run_dir = _new_run_dir(Path(config.trainer.default_root_dir or "runs"))
+        os.environ[_LAUNCHED_RUN_DIR] = str(run_dir)
         config.trainer.default_root_dir = str(run_dir)
         loggers = config.trainer.logger
         for logger in loggers if isinstance(loggers, list) else [loggers]:
@@ -76,18 +101,6 @@ class ZooCLI(LightningCLI):
 
 class DataNotFoundError(FileNotFoundError):
     """A run's data is missing (a user error: reported in one line, not as a traceback)."""
-
-
-@contextlib.contextmanager
-def _argv_only_the_program() -> Iterator[None]:
-    """LightningCLI warns when it gets ``args`` while ``sys.argv`` holds arguments too (it
-    cannot tell which the user meant); ``zoo`` passes the parsed arguments as ``args``."""
-    saved = sys.argv
-    sys.argv = saved[:1]
-    try:
-        yield
-    finally:
-        sys.argv = saved
 
 
 def _remove_failed_run_dirs(run_dirs: set[Path]) -> None:
@@ -109,19 +122,18 @@ def run_lightning_cli(argv: list[str]) -> LightningCLI:
     predicting = bool(argv) and argv[0] == "predict"
     given_before = set(_RUN_DIRS_GIVEN)
     try:
-        with _argv_only_the_program():
-            cli = ZooCLI(
-                L.LightningModule,
-                L.LightningDataModule,
-                subclass_mode_model=True,
-                subclass_mode_data=True,
-                save_config_callback=WandbSaveConfigCallback,
-                save_config_kwargs={"overwrite": True},
-                auto_configure_optimizers=False,
-                trainer_defaults={"callbacks": [NpzPredictionWriter()]} if predicting else None,
-                args=argv,
-                run=True,
-            )
+        cli = ZooCLI(
+            L.LightningModule,
+            L.LightningDataModule,
+            subclass_mode_model=True,
+            subclass_mode_data=True,
+            save_config_callback=WandbSaveConfigCallback,
+            save_config_kwargs={"overwrite": True},
+            auto_configure_optimizers=False,
+            trainer_defaults={"callbacks": [NpzPredictionWriter()]} if predicting else None,
+            args=argv,
+            run=True,
+        )
     except BaseException as err:
         # a run that failed must not stay the active W&B run: the next in-process run (a
         # notebook's retry) would log into it

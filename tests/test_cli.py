@@ -15,7 +15,8 @@ def test_help_lists_every_command():
     out = subprocess.run(
         [sys.executable, "-m", "zoo.cli", "--help"], capture_output=True, text=True, check=True
     ).stdout
-    for command in ("data", "eval", "captions", "expert", "export", "demo", "fit", "test"):
+    for command in ("data", "eval", "captions", "expert", "export", "demo", "pipeline", "fit",
+                    "test"):
         assert f"    {command} " in out or f"    {command}\n" in out, command
 
 

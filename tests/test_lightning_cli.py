@@ -92,8 +92,8 @@ def test_last_checkpoint_is_the_newest_not_the_best(crafterplay: Path, tmp_path:
     assert Path(best).parent == checkpoints and Path(best).name.startswith("best-step")
 
 
-CONFIGS = sorted(
-    p for p in CONFIG.parent.glob("*.yaml") if not p.name.startswith("expert_")  # PPO: own CLI
+CONFIGS = sorted(  # the PPO expert and the pipeline have their own CLIs
+    p for p in CONFIG.parent.glob("*.yaml") if not p.name.startswith(("expert_", "pipeline_"))
 )
 
 
@@ -242,3 +242,30 @@ def test_fit_from_the_command_line_gives_no_args_warning(
         warnings.simplefilter("always")
         _fit(crafterplay, tmp_path, 1)
     assert not [w for w in caught if "not recommended to provide both" in str(w.message)]
+
+
+@pytest.mark.slow
+def test_ddp_on_two_cpu_processes_trains_one_run_to_the_step_count(
+    crafterplay: Path, tmp_path: Path
+) -> None:
+    """`zoo fit` with the DDP strategy: Lightning starts rank 1 by running the command line
+    again, which must be the real one, and rank 1 must join rank 0's run folder."""
+    import subprocess
+    import sys
+
+    zoo = Path(sys.executable).parent / "zoo"
+    argv = [
+        str(zoo), "fit", f"--config={CONFIG}", f"--trainer.default_root_dir={tmp_path}",
+        "--trainer.max_steps=3", "--trainer.limit_val_batches=1", "--trainer.logger=false",
+        "--trainer.enable_progress_bar=false", "--trainer.accelerator=cpu",
+        "--trainer.devices=2", "--trainer.strategy=ddp", f"--data.init_args.root={crafterplay}",
+        "--data.init_args.seq_len=8", "--data.init_args.batch_size=2",
+        "--data.init_args.num_workers=0", "--data.init_args.val_fraction=0.3",
+        "--data.init_args.train_batches_per_epoch=2", "--model.init_args.tbptt_len=4",
+        "--model.init_args.memory_len=4",
+    ]
+    env = {k: v for k, v in os.environ.items() if "ZOO_" not in k} | {"OMP_NUM_THREADS": "1"}
+    done = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=600, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    (run,) = [p for p in tmp_path.iterdir() if p.is_dir()]  # one folder for both ranks
+    assert torch.load(run / "checkpoints" / "last.ckpt", weights_only=False)["global_step"] == 3

@@ -24,6 +24,7 @@ TOP_LEVEL = (
     ("zoo.demo", "register"),
     ("zoo.agents.play", "register"),
     ("zoo.rl.cli", "register"),
+    ("zoo.pipeline", "register"),
 )
 
 
@@ -34,7 +35,8 @@ def build_parser() -> argparse.ArgumentParser:
             "crafter-zoo: the CrafterDojo suite for Crafter. Generate expert data "
             "(zoo data generate), score agents in Craftax-Classic or crafter (zoo eval; task "
             "suites with zoo eval --task), train models with LightningCLI (zoo fit --config "
-            "configs/cvpt_smoke.yaml), and watch C-Steve-1 follow an instruction (zoo play)."
+            "configs/cvpt_smoke.yaml), watch C-Steve-1 follow an instruction (zoo play), or run it "
+            "all with one report (zoo pipeline --config configs/pipeline_quickstart.yaml)."
         ),
         epilog="Training verbs: " + ", ".join(TRAIN_VERBS) + " (see `zoo fit --help`).",
     )

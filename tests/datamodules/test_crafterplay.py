@@ -118,6 +118,19 @@ def test_workers_read_different_shards(crafterplay: Path) -> None:
     assert sum(parallel.values()) > 0
 
 
+def test_ddp_ranks_read_disjoint_shards_that_cover_the_split(
+    crafterplay: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    kwargs = dict(seq_len=4, noop_filter=False, val_fraction=0.0, test_fraction=0.0)
+    monkeypatch.setenv("WORLD_SIZE", "2")  # what DDP sets for each rank (webdataset reads it)
+    seen = []
+    for rank in ("0", "1"):
+        monkeypatch.setenv("RANK", rank)
+        seen.append(_episodes(_module(crafterplay, **kwargs), "train"))
+    assert seen[0] and seen[1] and not seen[0] & seen[1]
+    assert seen[0] | seen[1] == set(range(NUM_EPISODES))
+
+
 def test_with_epoch_fixes_the_epoch_length(crafterplay: Path) -> None:
     module = _module(crafterplay, seq_len=16, batch_size=2, train_batches_per_epoch=5)
     assert sum(1 for _ in module.train_dataloader()) == 5
