@@ -75,6 +75,10 @@ def register(subparsers) -> None:
     )
     p.add_argument("--no-gif", action="store_true", help="skip episode.gif")
     p.add_argument("--overwrite", action="store_true", help="replace a report already in --out")
+    p.add_argument(
+        "--wandb", action="store_true",
+        help="also log the report, plot and GIF as a W&B run (offline unless WANDB_MODE is set)",
+    )
     p.add_argument("--task", choices=sorted(TASKS), help="play this task and report its success")
     p.add_argument(
         "--instruction", metavar="TEXT",
@@ -178,8 +182,17 @@ def run_eval(args: argparse.Namespace) -> int:
     }
     report = write_report(results, args.out, meta)
     print(format_table(report))
-    print(f"wrote {', '.join(str(args.out / name) for name in report['files'])}")
+    _announce(args, report)
     return 0
+
+
+def _announce(args: argparse.Namespace, report: dict) -> None:
+    """Say what was written; with ``--wandb`` log it as a W&B run too."""
+    print(f"wrote {', '.join(str(args.out / name) for name in report['files'])}")
+    if args.wandb:
+        from zoo.eval.wandb_log import log_report
+
+        print(f"W&B run in {log_report(report, args.out)} (sync: wandb sync <that folder>)")
 
 
 def run_task_eval(args: argparse.Namespace, agent, num_envs: int, now: datetime) -> int:
@@ -230,5 +243,5 @@ def run_task_eval(args: argparse.Namespace, agent, num_envs: int, now: datetime)
     }
     report = write_task_report(results, rollouts, args.out, meta)
     print(format_task_table(report))
-    print(f"wrote {', '.join(str(args.out / name) for name in report['files'])}")
+    _announce(args, report)
     return 0

@@ -90,3 +90,27 @@ def test_temperature_is_only_for_sampling_policies(tmp_path, capsys):
     assert "temperature applies to the cvpt and csteve1 agents only, not 'random'" in capsys.readouterr().err
     assert main(eval_args(tmp_path / "run", "--temperature", "-1")) == 2
     assert "temperature must be >= 0" in capsys.readouterr().err
+
+
+def test_wandb_logs_the_report_as_an_offline_run(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("WANDB_MODE", "offline")
+    monkeypatch.setenv("WANDB_SILENT", "true")
+    assert main(eval_args(tmp_path / "run", "--wandb")) == 0
+    assert "W&B run in" in capsys.readouterr().out
+    (run,) = (tmp_path / "run" / "wandb").glob("offline-run-*")
+    assert list(run.glob("*.wandb"))  # the run's log, for `wandb sync`
+    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    from zoo.eval.wandb_log import report_scalars
+
+    scalars = report_scalars(report)
+    assert scalars["eval/crafter_score"] == report["crafter_score"]["mean"]
+    assert scalars["eval/success/collect_wood"] == report["success_rates"]["collect_wood"]
+
+
+def test_task_reports_give_their_success_and_sub_tasks_to_wandb():
+    from zoo.eval.wandb_log import report_scalars
+
+    report = {"success_percent": 25.0, "subtasks": [
+        {"instruction": "obtain coal", "completed_percent": 50.0}]}
+    assert report_scalars(report) == {"eval/task_success": 25.0,
+                                      "eval/subtask/1_obtain coal": 50.0}
