@@ -10,15 +10,19 @@ full lr. Validation and test report video -> text retrieval over groups of 64 he
 
 from __future__ import annotations
 
+import tempfile
 from collections import defaultdict
+from pathlib import Path
 
 import lightning as L
 import torch
+from lightning.pytorch.loggers import WandbLogger
 from lightning.pytorch.utilities import rank_zero_warn
 
 from lit_models.schedules import WarmupCosine
 from zoo.captions.vocabulary import load_vocabulary
-from zoo.eval.retrieval import DEFAULT_TOP_KS, grouped_retrieval_metrics
+from zoo.eval.plots import write_gif
+from zoo.eval.retrieval import DEFAULT_TOP_KS, grouped_retrieval_metrics, top_captions
 from zoo.models.cclip import CCLIPConfig, CCLIPModel
 from zoo.models.contrastive import multi_positive_infonce
 
@@ -52,6 +56,7 @@ class CCLIP(L.LightningModule):
         betas: tuple[float, float] = (0.9, 0.98),
         num_paraphrases: int | None = None,
         retrieval_group_size: int = 64,
+        example_clips: int = 8,
     ) -> None:
         """Args:
             model: C-CLIP preset (vit_b16: the paper's ViT-B/16 towers; smoke: tiny CPU towers);
@@ -83,6 +88,8 @@ class CCLIP(L.LightningModule):
             num_paraphrases: paraphrases per caption to sample from, besides the caption itself
                 (None: all in paraphrases.yaml; 0: template captions only).
             retrieval_group_size: candidate captions per retrieval query (paper: 64).
+            example_clips: held-out clips shown in a W&B table with their top-3 captions at
+                each validation/test end (0: none; needs a WandbLogger).
         """
         super().__init__()
         self.save_hyperparameters()
@@ -156,13 +163,43 @@ class CCLIP(L.LightningModule):
         loss = multi_positive_infonce(video, text, caption_ids, self.model.logit_scale)
         self.log(f"{stage}/loss", loss, batch_size=len(caption_ids), sync_dist=True)
         outputs = self._eval_outputs
+        if not outputs["video"]:  # the epoch's first batch: keep a few clips to show
+            self._examples = (batch["frames"][: self.hparams.example_clips].cpu(),
+                              caption_ids[: self.hparams.example_clips].cpu(),
+                              video[: self.hparams.example_clips].float().cpu())
         outputs["video"].append(video.float())
         outputs["text"].append(text.float())
         outputs["caption_id"].append(caption_ids)
 
+    def _log_examples(self, stage: str) -> None:
+        """A W&B table: each kept clip (as a video), its caption and C-CLIP's top-3 captions."""
+        loggers = [lg for lg in self.trainer.loggers if isinstance(lg, WandbLogger)]
+        examples, self._examples = getattr(self, "_examples", None), None
+        if not loggers or examples is None or not len(examples[0]) or not self.trainer.is_global_zero:
+            return
+        import wandb
+
+        frames, caption_ids, video = examples
+        texts = load_vocabulary().texts()
+        with torch.no_grad():
+            ids = torch.arange(len(texts), device=self.device)
+            text = self.model.encode_text(self.caption_tokens(ids, paraphrase=False))
+        tops = top_captions(video, text.cpu(), texts)
+        with tempfile.TemporaryDirectory() as tmp:  # W&B copies the GIFs when they are logged
+            rows = [
+                [wandb.Video(str(write_gif(clip.numpy(), Path(tmp) / f"{i}.gif", fps=4)),
+                             format="gif"), texts[int(cid)], *top]
+                for i, (clip, cid, top) in enumerate(zip(frames, caption_ids, tops))
+            ]
+            table = wandb.Table(columns=["clip", "caption", "top-1", "top-2", "top-3"], data=rows)
+            for logger in loggers:
+                logger.experiment.log({f"{stage}/examples": table,
+                                       "trainer/global_step": self.global_step})
+
     def _log_retrieval(self, stage: str) -> None:
         outputs = {key: torch.cat(parts) for key, parts in self._eval_outputs.items()}
         self._eval_outputs.clear()
+        self._log_examples(stage)
         if not outputs:
             return
         if self.trainer.world_size > 1:

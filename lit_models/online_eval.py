@@ -26,7 +26,7 @@ from zoo.agents.cvpt_agent import CVPTAgent, CVPTPolicy
 from zoo.agents.steve_agent import GoalEncoder, SteveAgent, StevePolicy
 from zoo.envs import make_env
 from zoo.envs.tasks import make_task_env
-from zoo.eval.plots import plot_success_rates
+from zoo.eval.plots import plot_success_rates, write_gif
 from zoo.eval.report import summarize
 from zoo.eval.rollout import evaluate
 from zoo.eval.tasks import evaluate_task, summarize_task
@@ -137,8 +137,7 @@ class OnlineEvaluation(Callback):
         with tempfile.TemporaryDirectory() as tmp:
             chart = plot_success_rates(rates, f"step {step}", Path(tmp) / "rates.png")
             media["online/achievements"] = wandb.Image(str(chart))
-            if frames is not None:
-                media["online/rollout"] = wandb.Video(
-                    np.ascontiguousarray(frames.transpose(0, 3, 1, 2)), fps=15, format="gif"
-                )
+            if frames is not None:  # from a file: raw arrays would need moviepy
+                gif = write_gif(frames, Path(tmp) / "rollout.gif", scale=1)
+                media["online/rollout"] = wandb.Video(str(gif), format="gif")
             logger.experiment.log(media | {"trainer/global_step": step})

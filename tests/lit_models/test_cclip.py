@@ -199,3 +199,26 @@ def test_smoke_config_runs_through_the_lightning_cli(caption_root, tmp_path):
         with torch.no_grad():
             expected = predicted.model.model.encode_video(first_batch["frames"]).numpy()
         np.testing.assert_allclose(pred["video_embedding"], expected, rtol=1e-4, atol=1e-5)
+
+
+def test_validation_logs_example_clips_with_their_top_captions_to_wandb(
+    caption_root, tmp_path, monkeypatch
+):
+    from lightning.pytorch.loggers import WandbLogger
+
+    monkeypatch.setenv("WANDB_SILENT", "true")
+    module = smoke_module(example_clips=3)
+    data = CrafterCaptionDataModule(
+        str(caption_root), batch_size=8, eval_batch_size=35, num_workers=0, val_split="test",
+    )  # fmt: skip
+    logger = WandbLogger(project="crafter-zoo", save_dir=str(tmp_path), offline=True)
+    logged = []
+    monkeypatch.setattr(type(logger.experiment), "log", lambda self, data, **kw: logged.append(data))
+    L.Trainer(accelerator="cpu", logger=logger, enable_progress_bar=False,
+              enable_model_summary=False, default_root_dir=tmp_path).validate(module, data)
+    (table,) = [d["val/examples"] for d in logged if "val/examples" in d]
+    assert table.columns == ["clip", "caption", "top-1", "top-2", "top-3"]
+    assert len(table.data) == 3
+    texts = load_vocabulary().texts()
+    assert all(row[1] in texts and set(row[2:]) <= set(texts) for row in table.data)
+    logger.experiment.finish()

@@ -67,3 +67,19 @@ def test_c_steve_1_is_scored_on_its_task_with_its_instruction():
 def test_a_half_configured_c_steve_1_evaluation_is_refused():
     with pytest.raises(ValueError, match="task, instruction, cclip and prior"):
         OnlineEvaluation(task="collect_sapling")
+
+
+def test_wandb_gets_the_bar_chart_and_the_rollout_video(tmp_path, monkeypatch):
+    import numpy as np
+    from lightning.pytorch.loggers import WandbLogger
+
+    monkeypatch.setenv("WANDB_SILENT", "true")
+    logger = WandbLogger(project="crafter-zoo", save_dir=str(tmp_path), offline=True)
+    logged = []
+    monkeypatch.setattr(type(logger.experiment), "log", lambda self, data, **kw: logged.append(data))
+    frames = np.zeros((5, 144, 144, 3), np.uint8)
+    OnlineEvaluation()._log_media(logger, {"collect_wood": 50.0}, frames, step=7)
+    (media,) = logged
+    assert {"online/achievements", "online/rollout"} <= set(media)
+    assert media["trainer/global_step"] == 7
+    logger.experiment.finish()

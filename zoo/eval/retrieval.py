@@ -19,6 +19,7 @@ candidates.
 from collections.abc import Sequence
 
 import torch
+from torch.nn import functional as F
 
 DEFAULT_TOP_KS = (1, 5, 10)
 
@@ -99,3 +100,13 @@ def _metrics_from_blocks(
     metrics["MeanR"] = float(ranks.mean())
     metrics["queries"] = float(len(ranks))
     return metrics
+
+
+def top_captions(video: torch.Tensor, text: torch.Tensor, texts: list[str], k: int = 3) -> list[list[str]]:
+    """The ``k`` caption texts nearest each video embedding (cosine; rows of ``text`` are the
+    captions' embeddings in the order of ``texts``), best first: what a person checks by eye."""
+    if text.shape[0] != len(texts):
+        raise ValueError(f"{text.shape[0]} text embeddings for {len(texts)} caption texts")
+    sims = F.normalize(video.float(), dim=-1) @ F.normalize(text.float(), dim=-1).T
+    order = sims.topk(min(k, len(texts)), dim=-1).indices.tolist()
+    return [[texts[i] for i in row] for row in order]

@@ -117,3 +117,14 @@ def test_collapsed_embeddings_in_groups_score_as_chance_or_worse():
     # 58 tie with 63 (rank 64).
     assert metrics["MeanR"] == pytest.approx((6 * 63 + 58 * 64) / 64)
     assert metrics["R@1"] == metrics["R@5"] == metrics["R@10"] == 0.0
+
+
+def test_top_captions_are_the_nearest_texts_best_first():
+    from zoo.eval.retrieval import top_captions
+
+    text = torch.tensor([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    video = torch.tensor([[2.0, 0.1], [0.0, -1.0]])
+    assert top_captions(video, text, ["a", "b", "ab"], k=2) == [["a", "ab"], ["a", "ab"]]
+    assert top_captions(video[:1], text, ["a", "b", "ab"], k=5) == [["a", "ab", "b"]]
+    with pytest.raises(ValueError, match="3 text embeddings for 2"):
+        top_captions(video, text, ["a", "b"])
