@@ -15,7 +15,6 @@ both read the held-out split by default (the paper evaluates retrieval on held-o
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import lightning as L
@@ -26,16 +25,19 @@ from torch.utils.data import DataLoader
 
 from datamodules.seeded_shuffle import EpochSeededStream, SeededShuffle, run_seed, seeded_loader
 from zoo.captions.clips import collate_clips
-from zoo.captions.dataset import decode_caption_sample, list_caption_shards
+from zoo.captions.dataset import (
+    decode_caption_sample,
+    list_caption_shards,
+    load_caption_manifest,
+)
 from zoo.captions.vocabulary import load_vocabulary
+from zoo.data.storage import join, tar_samples
 
 
 def check_manifest_captions(root: str | Path) -> None:
     """Caption ids in the shards must mean the captions this checkout's vocabulary lists."""
-    path = Path(root) / "manifest.json"
-    if not path.is_file():
-        raise FileNotFoundError(f"{path} does not exist; write the data with `zoo captions ...`")
-    listed = [entry["caption"] for entry in json.loads(path.read_text()).get("captions", [])]
+    path = join(root, "manifest.json")
+    listed = [entry["caption"] for entry in load_caption_manifest(root).get("captions", [])]
     expected = load_vocabulary().texts()
     if listed != expected:
         changed = [i for i, (a, b) in enumerate(zip(listed, expected)) if a != b]
@@ -64,7 +66,8 @@ class CrafterCaptionDataModule(L.LightningDataModule):
         seed: int | None = None,
     ) -> None:
         """Args:
-            root: CrafterCaption folder (manifest.json + shards), written by zoo.captions.dataset.
+            root: CrafterCaption folder (manifest.json + shards), written by zoo.captions.dataset,
+                or its URL (``https://host/captions/``, ``s3://bucket/captions``: docs/data.md).
             batch_size: training clips per batch (paper: 64).
             eval_batch_size: clips per validation/test batch.
             num_workers: DataLoader workers; each reads different shards.
@@ -92,7 +95,8 @@ class CrafterCaptionDataModule(L.LightningDataModule):
             self._checked = True
         urls = list_caption_shards(self.hparams.root, split)
         if not urls:
-            raise FileNotFoundError(f"{self.hparams.root}/manifest.json lists no {split!r} shards")
+            where = join(self.hparams.root, "manifest.json")
+            raise FileNotFoundError(f"{where} lists no {split!r} shards")
         return urls
 
     def dataset(self, split: str, train: bool, first_epoch: int = 0) -> EpochSeededStream:
@@ -108,7 +112,7 @@ class CrafterCaptionDataModule(L.LightningDataModule):
         if train:
             shuffles.append(SeededShuffle(len(urls), salt=0))
             stages.append(shuffles[-1])
-        stages += [wds.tarfile_to_samples(), wds.map(decode_caption_sample)]
+        stages += [tar_samples, wds.map(decode_caption_sample)]
         if train and hp.shuffle_buffer > 1:
             shuffles.append(SeededShuffle(hp.shuffle_buffer, salt=1))
             stages.append(shuffles[-1])
@@ -141,10 +145,9 @@ class CrafterCaptionDataModule(L.LightningDataModule):
         """
         hp = self.hparams
         if hp.val_split is None:
-            manifest = json.loads((Path(hp.root) / "manifest.json").read_text())
-            if "val" not in manifest["splits"]:
+            if "val" not in load_caption_manifest(hp.root)["splits"]:
                 raise ValueError(
-                    f"{hp.root}/manifest.json has no 'val' split, and validating on "
+                    f"{join(hp.root, 'manifest.json')} has no 'val' split, and validating on "
                     f"{hp.test_split!r} would choose checkpoints on the test episodes. Rebuild it "
                     "with `zoo data caption ... --val-episodes N`, or set "
                     f"data.init_args.val_split={hp.test_split} to accept that (smoke runs)"

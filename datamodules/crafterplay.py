@@ -98,8 +98,9 @@ class CrafterPlayDataModule(L.LightningDataModule):
         sources: list[dict] | None = None,
     ) -> None:
         """Args:
-            root: CrafterPlay folder (manifest.json + shards), e.g. from `zoo data generate`;
-                or give ``sources`` instead.
+            root: CrafterPlay folder (manifest.json + shards), e.g. from `zoo data generate`,
+                or its URL (``https://host/crafterplay/``, ``s3://bucket/crafterplay``: see
+                docs/data.md); or give ``sources`` instead.
             seq_len: steps per sequence (paper: 640); the model cuts it into TBPTT windows.
             batch_size: sequences per batch (per device).
             num_workers: DataLoader workers; each reads different shards.
@@ -117,7 +118,8 @@ class CrafterPlayDataModule(L.LightningDataModule):
                 ``seed_everything`` value.
             skip_corrupt: skip a shard that cannot be read to its end (with a warning that names
                 it) instead of stopping the run; its chunks before the damage are still used.
-            sources: several CrafterPlay folders with weights, ``[{root: DIR, weight: W}, ...]``
+            sources: several CrafterPlay folders (or URLs) with weights,
+                ``[{root: DIR, weight: W}, ...]``
                 (expert data plus DAgger rounds): training draws shards so that each folder
                 gives a share W / sum(W) of the steps; validation and test read every folder.
         """

@@ -83,7 +83,7 @@ class PriorPairsDataModule(L.LightningDataModule):
         seed: int | None = None,
     ) -> None:
         """Args:
-            root: the pairs file (.npz) written by `zoo data prior-pairs`.
+            root: the pairs file (.npz) written by `zoo data prior-pairs`, or its URL.
             batch_size: training pairs per batch.
             eval_batch_size: validation pairs per batch.
             val_fraction: share of the episodes held out for validation (at least one episode).

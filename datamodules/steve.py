@@ -52,8 +52,9 @@ class SteveDataModule(CrafterPlayDataModule):
         skip_corrupt: bool = False,
     ) -> None:
         """Args:
-        root: CrafterPlay folder (manifest.json + shards).
-        embeddings: its ``zoo data embed`` folder (C-CLIP goal embeddings + step captions).
+        root: CrafterPlay folder (manifest.json + shards) or its URL (docs/data.md).
+        embeddings: its ``zoo data embed`` folder (C-CLIP goal embeddings + step captions); a
+            local folder.
         relabel: ``event`` (the paper's event-based packing) or ``plain`` (STEVE-1's), for
             the relabelling ablation.
         min_gap: fewest steps a goal lies ahead (paper: 1).

@@ -41,6 +41,7 @@ from zoo.captions.balance import (
 )
 from zoo.captions.rules import CATEGORIES, EpisodeView, RuleParams, all_rules, scan_episode
 from zoo.captions.vocabulary import Caption, Vocabulary, load_vocabulary
+from zoo.data.storage import join, read_bytes
 
 SPLITS = ("train", "val", "test")  # "val" only when val_episodes > 0
 FORMAT_VERSION = 1
@@ -188,14 +189,24 @@ def decode_caption_sample(sample: dict) -> dict:
     return out
 
 
+def load_caption_manifest(root: str | Path) -> dict:
+    """root/manifest.json of a CrafterCaption folder or folder URL (``zoo.data.storage``)."""
+    path = join(root, "manifest.json")
+    try:
+        return json.loads(read_bytes(path))
+    except FileNotFoundError:
+        raise FileNotFoundError(
+            f"{path} does not exist; write the data with `zoo data caption`"
+        ) from None
+
+
 def list_caption_shards(root: str | Path, split: str) -> list[str]:
-    """Shard paths of one split, from root/manifest.json."""
-    root = Path(root)
-    manifest = json.loads((root / "manifest.json").read_text())
+    """Shard paths (or URLs) of one split, from root/manifest.json."""
+    manifest = load_caption_manifest(root)
     if split not in manifest["splits"]:
         splits = sorted(manifest["splits"])
-        raise ValueError(f"{root}/manifest.json has splits {splits}, not {split!r}")
-    return [str(root / s["name"]) for s in manifest["splits"][split]["shards"]]
+        raise ValueError(f"{join(root, 'manifest.json')} has splits {splits}, not {split!r}")
+    return [join(root, s["name"]) for s in manifest["splits"][split]["shards"]]
 
 
 def write_caption_dataset(

@@ -26,7 +26,7 @@ from zoo.captions.rules import EpisodeView, RuleParams, all_rules, scan_episode
 from zoo.captions.vocabulary import Vocabulary
 from zoo.data.manifest import MANIFEST
 from zoo.data.manifest import load_manifest as load_play_manifest
-from zoo.data.shards import sha256_file
+from zoo.data.storage import join, sha256_of
 
 FORMAT = "crafter-zoo-goal-embeddings"
 FORMAT_VERSION = 1
@@ -160,11 +160,11 @@ def check_embeddings_match(
     """Raise ValueError unless ``embed_root`` was made from exactly ``play_root``'s CrafterPlay
     manifest and covers all of its shards (some of them, with ``allow_partial``)."""
     embed = load_embedding_manifest(embed_root)
-    play_path = Path(play_root) / MANIFEST
+    play_path = join(play_root, MANIFEST)  # the CrafterPlay folder may be a URL
     play = load_play_manifest(play_root)
     if play is None:
         raise FileNotFoundError(f"{play_path} not found: not a CrafterPlay folder")
-    play_sha = sha256_file(play_path)
+    play_sha = sha256_of(play_path)
     made_from = embed["source"]["manifest_sha256"]
     if made_from != play_sha:
         raise EmbeddingMismatchError(

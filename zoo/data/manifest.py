@@ -13,6 +13,8 @@ import os
 from importlib import metadata
 from pathlib import Path
 
+from zoo.data.storage import join, read_bytes
+
 MANIFEST = "manifest.json"
 FORMAT = "crafterplay"
 FORMAT_VERSION = 1
@@ -39,12 +41,15 @@ def new_manifest(config: dict) -> dict:
 
 
 def load_manifest(root: str | Path) -> dict | None:
-    """The manifest of ``root``, or None when there is none yet."""
-    path = Path(root) / MANIFEST
-    if not path.exists():
+    """The manifest of ``root`` (a folder or folder URL, ``zoo.data.storage``), or None when
+    there is none yet."""
+    path = join(root, MANIFEST)
+    try:
+        text = read_bytes(path)
+    except FileNotFoundError:
         return None
     try:
-        manifest = json.loads(path.read_text())
+        manifest = json.loads(text)
     except json.JSONDecodeError as err:
         raise ValueError(f"{path}: not valid JSON ({err})") from err
     if manifest.get("format") != FORMAT or "shards" not in manifest:

@@ -17,6 +17,7 @@ and the counts. Both are written to temp names and renamed, so a killed run leav
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import os
 from collections import Counter
@@ -30,6 +31,7 @@ from tqdm import tqdm
 from zoo.captions.dataset import decode_caption_sample, list_caption_shards
 from zoo.captions.vocabulary import Vocabulary, load_vocabulary
 from zoo.cclip_demo import load_cclip_checkpoint
+from zoo.data.storage import read_bytes
 from zoo.export import checkpoint_sha256
 from zoo.models.cclip import CCLIPModel
 
@@ -184,11 +186,14 @@ def write_prior_pairs(
 
 def read_prior_pairs(path: str | Path, embed_dim: int | None = None) -> dict[str, np.ndarray]:
     """A pairs file's arrays, checked: every field present with one row per pair, and both
-    embeddings ``embed_dim`` wide when given."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path} does not exist; write it with `zoo data prior-pairs`")
-    with np.load(path, allow_pickle=False) as data:
+    embeddings ``embed_dim`` wide when given. ``path`` may be a URL (``zoo.data.storage``)."""
+    try:
+        raw = read_bytes(path)
+    except FileNotFoundError:
+        raise FileNotFoundError(
+            f"{path} does not exist; write it with `zoo data prior-pairs`"
+        ) from None
+    with np.load(io.BytesIO(raw), allow_pickle=False) as data:
         missing = sorted(set(PAIR_FIELDS) - set(data.files))
         if missing:
             raise ValueError(f"{path} lacks {missing}; expected a `zoo data prior-pairs` file")

@@ -15,13 +15,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import webdataset as wds
 
 from zoo.data.codec import decode_arrays, decode_frames
 from zoo.data.manifest import MANIFEST, load_manifest
 from zoo.data.noop import filter_noops
 from zoo.data.rerender import decode_rendered
 from zoo.data.shards import FRAMES, META, RENDER, RESIDUAL, STATE, STEPS
+from zoo.data.storage import join, tar_samples
 from zoo.envs.schema import validate_state
 
 STEP_ARRAYS = {"actions": np.int64, "rewards": np.float32, "noop": np.bool_, "noop_run": np.int32}
@@ -49,8 +49,8 @@ def list_shards(root: str | Path) -> list[str]:
     """Shard paths of a CrafterPlay folder, in index order, from its manifest."""
     manifest = load_manifest(root)
     if manifest is None:
-        raise FileNotFoundError(f"{Path(root) / MANIFEST} not found: not a CrafterPlay folder")
-    return [str(Path(root) / entry["file"]) for entry in manifest["shards"]]
+        raise FileNotFoundError(f"{join(root, MANIFEST)} not found: not a CrafterPlay folder")
+    return [join(root, entry["file"]) for entry in manifest["shards"]]
 
 
 def _where(sample: dict) -> str:
@@ -116,19 +116,16 @@ def _check_order(chunk: dict, expected: dict | None, url: str) -> dict | None:
 
 def _shard_chunks(url: str) -> Iterator[dict]:
     """Chunks of one shard; any read/decode failure becomes CorruptShardError naming it."""
-    # One named shard, read whole: no node/worker splitting here (inside a DataLoader worker
-    # WebDataset's default splitter would hand this lone shard to worker 0 only).
-    dataset = wds.WebDataset(
-        [url], shardshuffle=False, empty_check=False, nodesplitter=None, workersplitter=None
-    ).map(decode_sample)
+    # One named shard, read whole: no node/worker splitting here (the caller splits shards).
+    samples = tar_samples([{"url": url}])
     expected = None
-    iterator = iter(dataset)
     while True:
         try:
-            chunk = next(iterator)
-        except StopIteration:
-            break
-        except Exception as err:  # tarfile, zstd and decode errors alike
+            sample = next(samples, None)
+            if sample is None:
+                break
+            chunk = decode_sample(sample)
+        except Exception as err:  # open, tarfile, zstd and decode errors alike
             raise CorruptShardError(f"{url}: corrupt or truncated shard ({err})") from err
         expected = _check_order(chunk, expected, url)
         yield chunk

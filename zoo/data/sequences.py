@@ -18,6 +18,7 @@ from torch.utils.data import IterableDataset
 
 from zoo.data.manifest import MANIFEST, load_manifest
 from zoo.data.reader import CorruptShardError, ReadStats, filter_noops, iter_chunks
+from zoo.data.storage import join
 
 SPLITS = ("train", "val", "test")
 SEQUENCE_KEYS = ("frames", "actions", "first", "episode", "step")
@@ -45,13 +46,13 @@ class ShardSources(IterableDataset):
             manifest = load_manifest(root)
             if manifest is None:
                 raise FileNotFoundError(
-                    f"{Path(root) / MANIFEST} not found: not a CrafterPlay folder"
+                    f"{join(root, MANIFEST)} not found: not a CrafterPlay folder"
                 )
             entries = sorted(manifest["shards"], key=lambda e: e["index"])
             total = max(1, sum(int(e["steps"]) for e in entries))
             self.sources += [
                 {
-                    "url": str(Path(root) / e["file"]), "episodes": int(e["episodes"]),
+                    "url": join(root, e["file"]), "episodes": int(e["episodes"]),
                     "first_episode": int(e.get("first_episode", 0)), "index": e["index"], "steps": int(e["steps"]), "source": source,
                     "draw_weight": float(weight) / total,
                 }
