@@ -75,12 +75,12 @@ def run_train(args: argparse.Namespace) -> int:
 def run_plot(args: argparse.Namespace) -> int:
     from zoo.rl.plot import plot_runs
 
-    baselines = {}
+    baselines = []
     for item in args.baseline:
         label, sep, path = item.partition("=")
         if not sep or not label or not path:
             raise SystemExit(f"zoo rl plot: --baseline expects LABEL=report.json, got {item!r}")
-        baselines[label] = Path(path)
+        baselines.append((label, Path(path)))
     table = plot_runs(args.runs, args.out, baselines)
     table_path = Path(args.out).with_suffix(".json")
     table_path.write_text(json.dumps(table, indent=2) + "\n")

@@ -39,7 +39,9 @@ def mean_curve(curves: list[tuple[np.ndarray, np.ndarray]], points: int = 50):
     return grid, ys.mean(0), ys.std(0)
 
 
-def plot_runs(run_dirs: list[str | Path], out: str | Path, baselines: dict[str, Path]) -> dict:
+def plot_runs(
+    run_dirs: list[str | Path], out: str | Path, baselines: list[tuple[str, Path]]
+) -> dict:
     """Draw every run (grouped by task and agent) and the baselines; returns the final
     success rates per task and agent (mean and std over seeds, and the seed count)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -51,7 +53,7 @@ def plot_runs(run_dirs: list[str | Path], out: str | Path, baselines: dict[str, 
         if len(steps):
             groups[config["task"]][config["agent"]].append((steps, success))
     lines: dict[str, list[tuple[str, float]]] = defaultdict(list)
-    for label, path in baselines.items():
+    for label, path in baselines:  # a label may repeat: one line per task it reports
         report = json.loads(Path(path).read_text())
         lines[report["task"]].append((label, report["success_percent"] / 100))
     tasks = sorted(set(groups) | set(lines))

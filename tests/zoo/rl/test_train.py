@@ -99,15 +99,18 @@ def test_plot_averages_seeds_per_task_and_agent_and_draws_baselines(tmp_path):
     _fake_run(tmp_path / "b0", "ppo_steve", "T4", [0.1, 0.3])
     report = tmp_path / "steve_t2.json"
     report.write_text('{"task": "T2", "success_percent": 25.0}')
+    report4 = tmp_path / "steve_t4.json"
+    report4.write_text('{"task": "T4", "success_percent": 5.0}')
     runs = [str(tmp_path / n) for n in ("a0", "a1", "b0")]
     out = tmp_path / "fig.png"
     assert main(["rl", "plot", *runs, "--out", str(out), "--baseline",
-                 f"C-Steve-1={report}"]) == 0
+                 f"C-Steve-1={report}", "--baseline", f"C-Steve-1={report4}"]) == 0
     assert out.stat().st_size > 0
     table = yaml.safe_load(out.with_suffix(".json").read_text())
     assert table["T2"]["ppo_rnn"] == pytest.approx(
         {"success_rate": 0.4, "std": 0.2, "seeds": 2, "env_steps": 300})
     assert table["T2"]["C-Steve-1"]["success_rate"] == 0.25
     assert table["T4"]["ppo_steve"]["success_rate"] == pytest.approx(0.3)
+    assert table["T4"]["C-Steve-1"]["success_rate"] == 0.05  # a label per task, not per run
     with pytest.raises(SystemExit, match="LABEL=report.json"):
         main(["rl", "plot", runs[0], "--out", str(out), "--baseline", "nolabel"])
