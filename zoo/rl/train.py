@@ -5,8 +5,8 @@ files, and ``checkpoints/update_*.pt`` with the trainable parameters, the optimi
 update and env-step counts, the episode counter and the sampling generator: ``--resume``
 continues at the same env step with the same optimizer state (``total_env_steps`` may grow,
 to extend a run; every other setting must match). Episodes in flight at the
-checkpoint are dropped (not counted); the resumed run starts fresh episodes with the next
-episode seeds.
+checkpoint are dropped (not counted), as are metrics rows logged after it; the resumed run
+starts fresh episodes with the next episode seeds and a fresh 100-episode success window.
 """
 
 from __future__ import annotations
@@ -94,9 +94,13 @@ def train_rl(
     generator = torch.Generator().manual_seed(config.seed)
     env_steps, wall, episodes = 0, 0.0, 0
     if saved:
-        missing = policy.load_state_dict(saved["trainable"], strict=False).unexpected_keys
-        if missing:
-            raise ValueError(f"{found[-1]}: parameters {missing[:5]} are not in this agent")
+        unexpected = policy.load_state_dict(saved["trainable"], strict=False).unexpected_keys
+        absent = sorted({n for n, p in policy.named_parameters() if p.requires_grad}
+                        - set(saved["trainable"]))
+        if unexpected or absent:
+            raise ValueError(f"{found[-1]} does not fit this agent: unexpected parameters "
+                             f"{unexpected[:5]}, trained parameters it lacks {absent[:5]}")
+        _drop_rows_after(out / "metrics.csv", saved["update"])
         optimizer.load_state_dict(saved["optimizer"])
         generator.set_state(saved["generator"])
         env_steps, wall, episodes = saved["env_steps"], saved["wall_seconds"], saved["episodes"]
@@ -229,6 +233,16 @@ def _optimize(config, policy, optimizer, params, data, advantages, returns, stat
         "entropy": sums["entropy"] / count, "kl_ref": sums["kl_ref"] / count,
         "approx_kl": sums["approx_kl"] / count, "clip_fraction": sums["clip_fraction"] / count,
     }
+
+
+def _drop_rows_after(path: Path, update: int) -> None:
+    """Forget the rows a killed run logged after its last checkpoint: the resume redoes them."""
+    with path.open(newline="") as f:
+        rows = [r for r in csv.DictReader(f) if int(r["update"]) <= update]
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, COLUMNS)
+        writer.writeheader()
+        writer.writerows(rows)
 
 
 def _next_episode(env) -> int:

@@ -50,6 +50,8 @@ def test_resume_continues_the_step_count_and_the_optimizer_state(tmp_path):
         train_rl(TINY, run, progress=False)
     with pytest.raises(ValueError, match=r"\['lr'\] differ"):
         train_rl(TINY.replace(lr=1.0), run, resume=True, progress=False)
+    with (run / "metrics.csv").open("a") as f:  # a row logged after the checkpoint, then killed
+        f.write("2" + ",16" + "," * (len(_rows(run)[0]) - 2) + "\n")
     train_rl(TINY, run, resume=True, progress=False)
     rows = _rows(run)
     assert [(int(r["update"]), int(r["env_steps"])) for r in rows] == [(1, 8), (2, 16)]
