@@ -23,7 +23,6 @@ from pathlib import Path
 import torch
 
 from zoo.rl.config import RLConfig
-from zoo.rl.policies import count_parameters
 from zoo.rl.train import train_rl
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,13 +37,10 @@ def measure(agent: str, num_envs: int, updates: int) -> dict:
              if getattr(config, k)}
     config = config.replace(**paths, total_env_steps=config.env_steps_per_update * (updates + 1))
     with tempfile.TemporaryDirectory() as tmp:
-        train_rl(config, tmp, progress=False)
+        last = train_rl(config, tmp, progress=False)
         with (Path(tmp) / "metrics.csv").open() as f:
             rows = list(csv.DictReader(f))[1:]
-    from zoo.rl.agents import build_agent
-
-    _, policy = build_agent(config)
-    trainable, total = count_parameters(policy)
+    trainable, total = last["trainable_parameters"], last["total_parameters"]
     median = {k: statistics.median(float(r[k]) for r in rows)
               for k in ("env_steps_per_s", "env_share", "model_share", "update_share")}
     return {

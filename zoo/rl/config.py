@@ -75,7 +75,8 @@ class RLConfig(StrictConfig):
     seed: int = 0
     """Seeds the network init, the action sampling and every episode's world."""
     device: str = "cpu"
-    """Torch device of the networks."""
+    """Torch device of the networks; only ``cpu`` for now (the rollout buffers and the
+    frozen-feature observations live on the CPU, and no GPU run has checked the rest)."""
 
     def __post_init__(self) -> None:
         if self.agent not in AGENTS:
@@ -93,6 +94,11 @@ class RLConfig(StrictConfig):
             raise ValueError(
                 f"RLConfig.total_env_steps ({self.total_env_steps}) is less than one update "
                 f"({self.env_steps_per_update} env steps)"
+            )
+        if self.device != "cpu":
+            raise ValueError(
+                f"RLConfig.device={self.device!r}: zoo rl runs on cpu only so far (its rollout "
+                "buffers live on the CPU); set device: cpu"
             )
         needs = {"cvpt_rl": ("checkpoint",), "ppo_steve": ("checkpoint", "cclip", "prior")}
         missing = [k for k in needs.get(self.agent, ()) if getattr(self, k) is None]

@@ -121,7 +121,6 @@ class PlannerEnv:
         goals: torch.Tensor,
         option_steps: int,
         seed: int,
-        temperature: float = 1.0,
     ) -> None:
         if steve.model.config.conditioning != "head":
             raise ValueError(
@@ -135,11 +134,15 @@ class PlannerEnv:
         self.tasks, self.steve, self.goals = tasks, steve, goals.to(steve.device)
         self.num_envs, self.option_steps = tasks.num_envs, option_steps
         self.num_actions = len(goals)
-        self.temperature = temperature
         self._generator = torch.Generator().manual_seed(seed)
         self._state = None
         self._hidden: torch.Tensor | None = None
         self._last_choice = np.full(self.num_envs, -1)
+
+    @property
+    def next_episode(self) -> int:
+        """The episode counter of the task envs underneath (what a checkpoint keeps)."""
+        return self.tasks.next_episode
 
     @property
     def obs_dim(self) -> int:
@@ -177,7 +180,7 @@ class PlannerEnv:
             logits = self.steve.model.guided_head(
                 self._hidden.unsqueeze(1), goal.unsqueeze(1), self.steve.cfg_scale
             )[:, 0]
-            probs = torch.softmax(logits.float() / self.temperature, -1).cpu()
+            probs = torch.softmax(logits.float(), -1).cpu()
             actions = torch.multinomial(probs, 1, generator=self._generator)[:, 0].numpy()
             actions[waiting] = 0  # noop until the option ends
             tick = time.perf_counter()

@@ -185,6 +185,8 @@ def train_rl(
                 "model_share": model_time / seconds,
                 "update_share": update_time / seconds,
                 "wall_seconds": wall,
+                "trainable_parameters": trainable,  # not in metrics.csv: the same every row
+                "total_parameters": total,
             }
             writer.writerow({k: _csv(record[k]) for k in COLUMNS})
             f.flush()
@@ -195,7 +197,7 @@ def train_rl(
                             sps=f"{record['env_steps_per_s']:.0f}")
             if (update + 1) % config.checkpoint_every == 0 or update + 1 == config.num_updates:
                 counts = {"update": update + 1, "env_steps": env_steps, "episodes": episodes,
-                          "next_episode": _next_episode(env), "wall_seconds": wall}
+                          "next_episode": env.next_episode, "wall_seconds": wall}
                 _save(out, config, policy, optimizer, generator, counts)
     bar.close()
     if wandb_run is not None:
@@ -243,10 +245,6 @@ def _drop_rows_after(path: Path, update: int) -> None:
         writer = csv.DictWriter(f, COLUMNS)
         writer.writeheader()
         writer.writerows(rows)
-
-
-def _next_episode(env) -> int:
-    return (env.tasks if hasattr(env, "tasks") else env).next_episode
 
 
 def _save(out, config, policy, optimizer, generator, counts: dict[str, Any]) -> None:

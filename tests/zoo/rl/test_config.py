@@ -39,5 +39,7 @@ def test_bad_values_name_the_field():
     with pytest.raises(ValueError, match=r"needs \['checkpoint', 'cclip', 'prior'\]"):
         RLConfig.from_dict(base | {"agent": "ppo_steve", "checkpoint": None, "cclip": None,
                                    "prior": None})
+    with pytest.raises(ValueError, match="cpu only"):
+        RLConfig.from_dict(base | {"device": "cuda"})
     with pytest.raises(ValueError, match="lr must be float"):
         RLConfig.from_dict(base | {"lr": "fast"})

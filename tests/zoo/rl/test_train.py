@@ -29,8 +29,10 @@ def _trainable(run) -> dict[str, torch.Tensor]:
 
 
 def test_a_run_logs_every_update_and_repeats_from_its_seed(tmp_path):
-    train_rl(TINY, tmp_path / "a", progress=False)
+    last = train_rl(TINY, tmp_path / "a", progress=False)
     train_rl(TINY, tmp_path / "b", progress=False)
+    assert last["env_steps"] == 16
+    assert last["trainable_parameters"] == last["total_parameters"] > 0  # PPO-RNN trains all
     rows = _rows(tmp_path / "a")
     assert [int(r["env_steps"]) for r in rows] == [8, 16]
     assert all(0 <= float(r["env_share"]) <= 1 for r in rows)
