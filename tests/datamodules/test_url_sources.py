@@ -21,6 +21,7 @@ from datamodules.crafterplay import CrafterPlayDataModule
 from zoo.captions.dataset import EpisodeInfo, _encode_sample, _write_tar
 from zoo.captions.vocabulary import load_vocabulary
 from zoo.data.generate import GenerationConfig, generate
+from zoo.data.storage import open_binary
 
 SPLIT = {"val_fraction": 0.25, "test_fraction": 0.25}
 
@@ -139,3 +140,29 @@ def test_craftercaption_over_http_equals_the_local_folder(served) -> None:
                      batches(url + "captions", split, train))
     with pytest.raises(FileNotFoundError, match=re.escape(f"{url}nowhere/manifest.json")):
         CrafterCaptionDataModule(url + "nowhere", num_workers=0).shards("train")
+
+
+def test_crafterplay_through_a_pipe_command_equals_the_local_folder(served) -> None:
+    folder, _ = served
+    local = str(folder / "crafterplay")
+    piped = _play(f"pipe:cat {local}/{{name}}")
+    assert piped.shards.sources[0]["url"] == f"pipe:cat {local}/crafterplay-000000.tar"
+    for split in ("train", "val"):
+        _assert_same(_batches(_play(local).dataset(split)), _batches(piped.dataset(split)))
+
+
+def test_a_failing_pipe_command_is_an_error_naming_it_and_its_stderr(served) -> None:
+    folder, _ = served
+    root = f"pipe:cat {folder}/nowhere/{{name}}"
+    with pytest.raises(OSError, match=re.escape(f"pipe:cat {folder}/nowhere/manifest.json: the "
+                                                "command exited with status 1 (cat: ")):
+        _ = _play(root).shards
+    with pytest.raises(ValueError, match=re.escape("needs {name} where the file name goes")):
+        _ = _play(f"pipe:cat {folder}/crafterplay/manifest.json").shards
+
+
+def test_a_pipe_closed_before_its_end_stops_the_command_without_an_error(tmp_path) -> None:
+    with open_binary("pipe:yes") as stream:  # never ends on its own
+        assert stream.read(4) == b"y\ny\n"
+    with open_binary("pipe:printf abc; exit 3") as stream:
+        assert stream.read(2) == b"ab"  # stopped before the end: the status is not an error

@@ -6,11 +6,20 @@ installed (``s3://`` needs s3fs, ``gs://`` gcsfs), and no external program is ne
 (webdataset's own opener pipes ``http(s)://`` through ``curl`` and ``s3://`` through the aws
 CLI). Shards are read front to back as tar streams, so an HTTP shard is one streamed GET and
 the server need not support range requests. Local paths are opened with ``open`` as before.
+
+A root ``pipe:COMMAND`` is WebDataset's escape hatch for any other transfer tool: ``{name}`` in
+the command is replaced by the file's name and the command's stdout is the file, e.g.
+``pipe:aws s3 cp s3://bucket/crafterplay/{name} -`` or ``pipe:ssh host cat /data/cp/{name}``.
+A command that exits non-zero is an OSError naming it, its exit status and its stderr.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
+import signal
+import subprocess
+import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO
@@ -21,12 +30,27 @@ STREAMED = ("http", "https")
 """Protocols opened as one stream (``block_size=0``) instead of block-wise range requests."""
 
 
+PIPE = "pipe:"
+NAME = "{name}"
+
+
+def is_pipe(root: str | Path) -> bool:
+    return str(root).startswith(PIPE)
+
+
 def is_url(root: str | Path) -> bool:
-    return "://" in str(root)
+    return is_pipe(root) or "://" in str(root)
 
 
 def join(root: str | Path, name: str) -> str:
     """The path or URL of the file ``name`` in the folder ``root``."""
+    if is_pipe(root):
+        if NAME not in str(root):
+            raise ValueError(
+                f"{root}: a pipe: dataset root needs {NAME} where the file name goes, e.g. "
+                "pipe:aws s3 cp s3://bucket/crafterplay/{name} -"
+            )
+        return str(root).replace(NAME, name)
     if is_url(root):
         return f"{str(root).rstrip('/')}/{name}"
     return str(Path(root) / name)
@@ -58,6 +82,8 @@ def open_binary(url: str | Path) -> IO[bytes]:
     if not is_url(url):
         return open(url, "rb")
     url = str(url)
+    if is_pipe(url):
+        return _PipeReader(url)
     _check_protocols(url)
     options = {"block_size": 0} if url.split("://", 1)[0] in STREAMED else {}
     try:
@@ -66,6 +92,47 @@ def open_binary(url: str | Path) -> IO[bytes]:
         if isinstance(err.__cause__, OSError):
             raise OSError(f"{url}: cannot be read ({err.__cause__})") from err.__cause__
         raise FileNotFoundError(f"{url} not found") from None
+
+
+class _PipeReader:
+    """The stdout of a ``pipe:`` command as a binary file. Closing it after the end of the
+    output checks the exit status, so a transfer that failed half-way is an error, not a short
+    shard; closing it earlier (a reader that stopped, an epoch that ended mid-shard) stops the
+    command."""
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+        self._ended = False
+        self._stderr = tempfile.TemporaryFile()  # a pipe could fill up and stall the command
+        self._process = subprocess.Popen(
+            url[len(PIPE):], shell=True, stdout=subprocess.PIPE, stderr=self._stderr,
+            start_new_session=True,  # its own process group: stopping it stops its children
+        )
+
+    def read(self, size: int = -1) -> bytes:
+        data = self._process.stdout.read(size)
+        self._ended = self._ended or not data or size < 0
+        return data
+
+    def close(self) -> None:
+        if self._process.returncode is not None:
+            return
+        if not self._ended:
+            os.killpg(self._process.pid, signal.SIGKILL)
+        self._process.stdout.close()
+        status = self._process.wait()
+        self._stderr.seek(0)
+        stderr = self._stderr.read().decode(errors="replace").strip()
+        self._stderr.close()
+        if self._ended and status != 0:
+            last = stderr.splitlines()[-1] if stderr else "no stderr"
+            raise OSError(f"{self.url}: the command exited with status {status} ({last})")
+
+    def __enter__(self) -> _PipeReader:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def read_bytes(url: str | Path) -> bytes:
