@@ -10,11 +10,13 @@ the server need not support range requests. Local paths are opened with ``open``
 A root ``pipe:COMMAND`` is WebDataset's escape hatch for any other transfer tool: ``{name}`` in
 the command is replaced by the file's name and the command's stdout is the file, e.g.
 ``pipe:aws s3 cp s3://bucket/crafterplay/{name} -`` or ``pipe:ssh host cat /data/cp/{name}``.
-A command that exits non-zero is an OSError naming it, its exit status and its stderr.
+A command that reaches the end of its output with a non-zero exit status is an OSError naming
+it, the status and its stderr.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import signal
@@ -118,7 +120,8 @@ class _PipeReader:
         if self._process.returncode is not None:
             return
         if not self._ended:
-            os.killpg(self._process.pid, signal.SIGKILL)
+            with contextlib.suppress(ProcessLookupError):  # it may be gone already
+                os.killpg(self._process.pid, signal.SIGKILL)
         self._process.stdout.close()
         status = self._process.wait()
         self._stderr.seek(0)
