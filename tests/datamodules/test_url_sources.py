@@ -21,6 +21,7 @@ from datamodules.crafterplay import CrafterPlayDataModule
 from zoo.captions.dataset import EpisodeInfo, _encode_sample, _write_tar
 from zoo.captions.vocabulary import load_vocabulary
 from zoo.data.generate import GenerationConfig, generate
+from zoo.data.reader import CorruptShardError
 from zoo.data.storage import open_binary
 
 SPLIT = {"val_fraction": 0.25, "test_fraction": 0.25}
@@ -164,5 +165,17 @@ def test_a_failing_pipe_command_is_an_error_naming_it_and_its_stderr(served) -> 
 def test_a_pipe_closed_before_its_end_stops_the_command_without_an_error(tmp_path) -> None:
     with open_binary("pipe:yes") as stream:  # never ends on its own
         assert stream.read(4) == b"y\ny\n"
-    with open_binary("pipe:printf abc; exit 3") as stream:
-        assert stream.read(2) == b"ab"  # stopped before the end: the status is not an error
+    with open_binary("pipe:head -c 1000000 /dev/zero; exit 3") as stream:
+        assert stream.read(2) == b"\0\0"  # stopped long before the end: status not checked
+    with pytest.raises(OSError, match="status 3"), open_binary("pipe:printf abc; exit 3") as stream:
+        assert stream.read(2) == b"ab"  # a few bytes short of the end: the status counts
+
+
+def test_a_shard_command_that_fails_at_its_end_is_a_corrupt_shard(served) -> None:
+    folder, _ = served
+    local = str(folder / "crafterplay")
+    # the whole shard arrives, then the command reports failure: an error, not a good shard
+    piped = _play(f"pipe:cat {local}/{{name}}; test {{name}} = manifest.json")
+    with pytest.raises(CorruptShardError, match=re.escape(
+            f"pipe:cat {local}/crafterplay-00000") + ".*exited with status 1"):
+        _batches(piped.dataset("train"))

@@ -34,6 +34,9 @@ STREAMED = ("http", "https")
 
 PIPE = "pipe:"
 NAME = "{name}"
+TAIL_BYTES = 1 << 16
+"""Output a closed pipe still reads to find its end (tar padding is at most 10 KiB): ending
+within it counts as read to the end, so the exit status is checked."""
 
 
 def is_pipe(root: str | Path) -> bool:
@@ -97,10 +100,10 @@ def open_binary(url: str | Path) -> IO[bytes]:
 
 
 class _PipeReader:
-    """The stdout of a ``pipe:`` command as a binary file. Closing it after the end of the
-    output checks the exit status, so a transfer that failed half-way is an error, not a short
-    shard; closing it earlier (a reader that stopped, an epoch that ended mid-shard) stops the
-    command."""
+    """The stdout of a ``pipe:`` command as a binary file. Closing it at (or within
+    ``TAIL_BYTES`` of) the end of the output checks the exit status, so a transfer that failed
+    is an error, not a short shard; closing it earlier (an epoch that ended mid-shard) stops
+    the command."""
 
     def __init__(self, url: str) -> None:
         self.url = url
@@ -119,7 +122,9 @@ class _PipeReader:
     def close(self) -> None:
         if self._process.returncode is not None:
             return
-        if not self._ended:
+        if not self._ended:  # a tar reader stops at the end-of-archive marker: drain padding
+            self._ended = len(self._process.stdout.read(TAIL_BYTES)) < TAIL_BYTES
+        if not self._ended:  # stopped early for real (an epoch ended mid-shard)
             with contextlib.suppress(ProcessLookupError):  # it may be gone already
                 os.killpg(self._process.pid, signal.SIGKILL)
         self._process.stdout.close()
