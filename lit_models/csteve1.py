@@ -31,6 +31,7 @@ class CSteve1(SequenceBC):
         backbone: str | None = None,
         goal_dim: int = 512,
         conditioning: Conditioning = "head",
+        head_hidden: int = 0,
         lora_rank: int = 16,
         lora_alpha: float = 16.0,
         lora_dropout: float = 0.0,
@@ -50,6 +51,8 @@ class CSteve1(SequenceBC):
         backbone: the C-VPT to start from: a ``zoo fit`` .ckpt or a ``zoo export`` folder.
         goal_dim: goal embedding width; must equal the C-CLIP embedding size of the data.
         conditioning: ``head`` (the paper's) or ``trxl_input`` (STEVE-1's; the ablation).
+        head_hidden: width of a trainable hidden layer before C-VPT's linear policy head (VPT's
+            head has one; 0: none, and head conditioning is one logit offset per goal).
         lora_rank: LoRA rank on the Transformer-XL (0: train the conditioning layer only).
         lora_alpha: LoRA scale numerator.
         lora_dropout: dropout on the LoRA branch.

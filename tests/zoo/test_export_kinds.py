@@ -82,7 +82,7 @@ def _prior() -> tuple[nn.Module, dict]:
 
 def _steve() -> tuple[nn.Module, dict]:
     backbone = CVPTModel(CVPTConfig.from_name("tiny", **CVPT_SIZES))
-    config = SteveConfig(goal_dim=16, lora_rank=2, lora_targets=["query", "ff.0"])
+    config = SteveConfig(goal_dim=16, lora_rank=2, lora_targets=["query", "ff.0"], head_hidden=8)
     hparams = {
         "_class_path": "lit_models.csteve1.CSteve1",
         "backbone": "cvpt.ckpt",

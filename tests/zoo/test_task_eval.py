@@ -9,6 +9,7 @@ import pytest
 
 from zoo.envs.tasks import LONG_HORIZON_TASKS, SINGLE_STEP_TASKS, TASKS, make_task_env
 from zoo.eval.tasks import (
+    compare_success,
     TaskEpisode,
     evaluate_task,
     summarize_task,
@@ -42,6 +43,20 @@ def test_wilson_interval_rejects_impossible_counts():
 def _episode(i: int, steps: list[int | None]) -> TaskEpisode:
     success = all(s is not None for s in steps)
     return TaskEpisode(i, i, success, steps[-1] if success else None, steps, 100)
+
+
+def test_compare_success_counts_ahead_and_separated_tasks():
+    def cell(successes: int, n: int = 100) -> dict:
+        return {"success_percent": 100 * successes / n,
+                "wilson95_percent": [100 * x for x in wilson_interval(successes, n)]}
+
+    steve = {"a": cell(39), "b": cell(50), "c": cell(99), "d": cell(30)}
+    cvpt = {"a": cell(7), "b": cell(62), "c": cell(92)}  # no "d": not compared
+    result = compare_success(steve, cvpt)
+    assert result["tasks"] == ["a", "b", "c"]
+    assert result["ahead"] == ["a", "c"]
+    # 99/100 -> 94.6-99.8% overlaps 92/100 -> 85.0-95.9%; 39/100 (30.0-48.8) clears 7/100 (3.4-13.7)
+    assert result["separated"] == ["a"]
 
 
 def test_summary_and_report(tmp_path):

@@ -213,3 +213,17 @@ def format_task_table(report: dict) -> str:
             f" {'-' if step is None else f'{step:.0f}'} |"
         )
     return "\n".join(lines)
+
+
+def compare_success(agent: dict[str, dict], baseline: dict[str, dict]) -> dict[str, list[str]]:
+    """Tasks (keys present in both) where ``agent``'s task report has a higher success rate
+    than ``baseline``'s ("ahead"), and where its Wilson 95% interval lies wholly above the
+    baseline's ("separated"): the C-Steve-1 issue's test against unconditioned C-VPT."""
+    tasks = [t for t in agent if t in baseline]
+    return {
+        "tasks": tasks,
+        "ahead": [t for t in tasks if agent[t]["success_percent"] > baseline[t]["success_percent"]],
+        "separated": [
+            t for t in tasks if agent[t]["wilson95_percent"][0] > baseline[t]["wilson95_percent"][1]
+        ],
+    }

@@ -6,6 +6,14 @@ paper's conditioning ablation) adds W z_t + b to the image features before the T
 instead. W and b start at zero and LoRA's B matrices start at zero, so before training
 C-Steve-1 is exactly the C-VPT it was built from, whatever the goal.
 
+VPT's policy head has a hidden layer (ReLU, linear + ReLU, LayerNorm, then the action logits), so
+a goal added before it changes the action distribution state by state. C-VPT's policy head is
+one linear layer; over it, head conditioning is W_head (W z + b): one logit offset per goal,
+the same in every state (an action prior, not a plan). ``head_hidden`` > 0 restores the
+hidden layer as a trainable residual block before the frozen head,
+x'' = x' + W_2 relu(W_1 LayerNorm(x') + b_1) + b_2 with W_2, b_2 zero at the start, so the
+goal's effect can depend on the state and the untrained model is still the backbone.
+
 Fine-tuning is LoRA on the Transformer-XL's linear layers (``peft``), plus the conditioning
 layer; the image encoder, the TrXL's base weights, norms and the policy head stay frozen
 (``trainable_parameters`` names what trains).
@@ -41,6 +49,9 @@ class SteveConfig:
     """Width of the goal embedding (the C-CLIP embedding size)."""
     conditioning: Conditioning = "head"
     """``head``: after the Transformer-XL (the paper's); ``trxl_input``: before it (STEVE-1's)."""
+    head_hidden: int = 0
+    """Width of the trainable hidden layer before the frozen linear policy head (0: none; then
+    head conditioning is a state-independent logit offset per goal, see the module doc)."""
     lora_rank: int = 16
     """Rank of the LoRA updates on the Transformer-XL (0: no LoRA, conditioning only)."""
     lora_alpha: float = 16.0
@@ -56,9 +67,10 @@ class SteveConfig:
     def __post_init__(self) -> None:
         if self.conditioning not in CONDITIONINGS:
             raise ValueError(f"conditioning={self.conditioning!r}: expected one of {CONDITIONINGS}")
-        if self.goal_dim < 1 or self.lora_rank < 0:
+        if self.goal_dim < 1 or self.lora_rank < 0 or self.head_hidden < 0:
             raise ValueError(
-                f"goal_dim={self.goal_dim} must be >= 1 and lora_rank={self.lora_rank} >= 0"
+                f"goal_dim={self.goal_dim} must be >= 1, lora_rank={self.lora_rank} and "
+                f"head_hidden={self.head_hidden} >= 0"
             )
 
     def to_dict(self) -> dict:
@@ -70,6 +82,7 @@ class SteveConfig:
         names = (
             "goal_dim",
             "conditioning",
+            "head_hidden",
             "lora_rank",
             "lora_alpha",
             "lora_dropout",
@@ -92,6 +105,7 @@ class SteveModel(nn.Module):
         self.condition = nn.Linear(config.goal_dim, backbone.config.d_model)
         nn.init.zeros_(self.condition.weight)
         nn.init.zeros_(self.condition.bias)
+        self.head_block = _head_block(backbone.config.d_model, config.head_hidden)
         if config.lora_rank > 0:
             lora = LoraConfig(
                 r=config.lora_rank,
@@ -101,10 +115,11 @@ class SteveModel(nn.Module):
             )
             inject_adapter_in_model(lora, backbone.trxl)
         for name, param in self.named_parameters():
-            param.requires_grad_(name.startswith("condition.") or "lora_" in name)
+            trains = name.startswith(("condition.", "head_block.")) or "lora_" in name
+            param.requires_grad_(trains)
 
     def trainable_parameters(self) -> dict[str, nn.Parameter]:
-        """The LoRA and conditioning parameters: all that fine-tuning changes."""
+        """The LoRA, conditioning and head-block parameters: all that fine-tuning changes."""
         return {name: p for name, p in self.named_parameters() if p.requires_grad}
 
     def initial_state(self, batch: int, device: torch.device | str | None = None) -> TrXLState:
@@ -129,7 +144,13 @@ class SteveModel(nn.Module):
         hidden, state = self.backbone.trxl(x, first.bool(), state)
         if self.config.conditioning == "head":
             hidden = hidden + self._goal_term(goal, hidden)
-        return self.backbone.policy_head(hidden), state
+        return self.head(hidden), state
+
+    def head(self, hidden: torch.Tensor) -> torch.Tensor:
+        """Action logits from (conditioned) TrXL features: the head block, then C-VPT's head."""
+        if self.head_block is not None:
+            hidden = hidden + self.head_block(hidden)
+        return self.backbone.policy_head(hidden)
 
     def guided_logits(
         self,
@@ -151,7 +172,7 @@ class SteveModel(nn.Module):
         x = self.backbone.encode_frames(frames)
         x = torch.cat([x + self._goal_term(goal, x), x + self._goal_term(torch.zeros_like(goal), x)])
         hidden, state = self.backbone.trxl(x, torch.cat([first, first]).bool(), state)
-        cond, uncond = self.backbone.policy_head(hidden).chunk(2)
+        cond, uncond = self.head(hidden).chunk(2)
         return combine_guidance(cond, uncond, scale), state
 
     def guided_head(self, hidden: torch.Tensor, goal: torch.Tensor, scale: float) -> torch.Tensor:
@@ -160,14 +181,26 @@ class SteveModel(nn.Module):
         too (PPO-Steve's planner) runs the Transformer-XL once."""
         if self.config.conditioning != "head":
             raise ValueError("guided_head needs head conditioning; use guided_logits")
-        cond = self.backbone.policy_head(hidden + self._goal_term(goal, hidden))
-        uncond = self.backbone.policy_head(hidden + self._goal_term(torch.zeros_like(goal), hidden))
+        cond = self.head(hidden + self._goal_term(goal, hidden))
+        uncond = self.head(hidden + self._goal_term(torch.zeros_like(goal), hidden))
         return combine_guidance(cond, uncond, scale)
 
     def guidance_state(self, batch: int, device: torch.device | str | None = None) -> TrXLState:
         """Empty TrXL memory for ``guided_logits`` on ``batch`` envs."""
         rows = batch if self.config.conditioning == "head" else 2 * batch
         return self.initial_state(rows, device)
+
+
+def _head_block(width: int, hidden: int) -> nn.Sequential | None:
+    """LayerNorm -> Linear -> ReLU -> Linear (zero-initialised output), or None for 0."""
+    if hidden == 0:
+        return None
+    block = nn.Sequential(
+        nn.LayerNorm(width), nn.Linear(width, hidden), nn.ReLU(), nn.Linear(hidden, width)
+    )
+    nn.init.zeros_(block[-1].weight)
+    nn.init.zeros_(block[-1].bias)
+    return block
 
 
 def combine_guidance(cond: torch.Tensor, uncond: torch.Tensor, scale: float) -> torch.Tensor:

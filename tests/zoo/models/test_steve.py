@@ -35,12 +35,16 @@ def _randomise_trainable(model: SteveModel) -> None:
             param.normal_(0, 0.2)
 
 
-@pytest.mark.parametrize("conditioning", ["head", "trxl_input"])
-def test_untrained_steve_is_its_cvpt_whatever_the_goal(conditioning: str) -> None:
+VARIANTS = [("head", 0), ("trxl_input", 0), ("head", 16)]  # (conditioning, head_hidden)
+
+
+@pytest.mark.parametrize(("conditioning", "head_hidden"), VARIANTS)
+def test_untrained_steve_is_its_cvpt_whatever_the_goal(conditioning: str, head_hidden: int) -> None:
     frames, first, goal = _inputs()
     cvpt = _backbone()
     expected, _ = cvpt(frames, first, cvpt.initial_state(2))
-    steve = SteveModel(_backbone(), SteveConfig(goal_dim=GOAL_DIM, conditioning=conditioning))
+    config = SteveConfig(goal_dim=GOAL_DIM, conditioning=conditioning, head_hidden=head_hidden)
+    steve = SteveModel(_backbone(), config)
     logits, _ = steve(frames, first, goal, steve.initial_state(2))
     torch.testing.assert_close(logits, expected, rtol=1e-5, atol=1e-5)  # float rounding only
 
@@ -78,6 +82,27 @@ def test_goal_changes_the_policy_once_trained() -> None:
     assert not torch.allclose(a, b)
 
 
+@pytest.mark.parametrize("head_hidden", [0, 16])
+def test_head_goal_effect_depends_on_the_state_only_with_a_head_block(head_hidden: int) -> None:
+    """Over C-VPT's linear head, head conditioning shifts every state's logits by the same
+    vector; the head block makes the shift state-dependent (and trains: the guard below)."""
+    steve = SteveModel(_backbone(), SteveConfig(goal_dim=GOAL_DIM, head_hidden=head_hidden))
+    _randomise_trainable(steve)
+    has_block = any(n.startswith("head_block.") for n in steve.trainable_parameters())
+    assert has_block == (head_hidden > 0)
+    hidden = torch.randn(10, 1, 32, generator=torch.Generator().manual_seed(0))  # 10 states
+    goal = torch.randn(1, 1, GOAL_DIM).expand(10, 1, GOAL_DIM)  # one goal for every state
+    with torch.no_grad():
+        cond = steve.head(hidden + steve._goal_term(goal, hidden))
+        uncond = steve.head(hidden + steve._goal_term(torch.zeros_like(goal), hidden))
+    shift = (cond - uncond)[:, 0]
+    spread = (shift - shift[0]).abs().max().item()
+    if head_hidden:
+        assert spread > 0.1
+    else:
+        assert spread < 1e-5
+
+
 def test_combine_guidance_on_fixed_logits() -> None:
     cond = torch.tensor([[2.0, 0.0, -1.0]])
     uncond = torch.tensor([[1.0, 1.0, 1.0]])
@@ -87,10 +112,13 @@ def test_combine_guidance_on_fixed_logits() -> None:
     torch.testing.assert_close(combine_guidance(cond, uncond, 0.0), cond)
 
 
-@pytest.mark.parametrize("conditioning", ["head", "trxl_input"])
-def test_guided_steps_equal_separate_conditional_and_unconditional_passes(conditioning: str) -> None:
+@pytest.mark.parametrize(("conditioning", "head_hidden"), VARIANTS)
+def test_guided_steps_equal_separate_conditional_and_unconditional_passes(
+    conditioning: str, head_hidden: int
+) -> None:
     """Step by step with cached memory, one batched forward = two full-history passes."""
-    steve = SteveModel(_backbone(), SteveConfig(goal_dim=GOAL_DIM, conditioning=conditioning))
+    config = SteveConfig(goal_dim=GOAL_DIM, conditioning=conditioning, head_hidden=head_hidden)
+    steve = SteveModel(_backbone(), config)
     _randomise_trainable(steve)
     frames, first, goal = _inputs(steps=6)
     scale = 1.5
@@ -115,5 +143,7 @@ def test_bad_goal_shape_and_config_are_named() -> None:
     frames, first, goal = _inputs()
     with pytest.raises(ValueError, match=r"goal must have shape \(2, 5, 8\)"):
         steve(frames, first, goal[..., :4], steve.initial_state(2))
+    with pytest.raises(ValueError, match="head_hidden=-1"):
+        SteveConfig(head_hidden=-1)
     with pytest.raises(ValueError, match="conditioning='resnet'"):
         SteveConfig(conditioning="resnet")  # type: ignore[arg-type]
