@@ -15,7 +15,7 @@ x'' = x' + W_2 relu(W_1 LayerNorm(x') + b_1) + b_2 with W_2, b_2 zero at the sta
 goal's effect can depend on the state and the untrained model is still the backbone.
 
 Fine-tuning is LoRA on the Transformer-XL's linear layers (``peft``), plus the conditioning
-layer; the image encoder, the TrXL's base weights, norms and the policy head stay frozen
+layer (and the head block); the image encoder, the TrXL's base weights, norms and the policy head stay frozen
 (``trainable_parameters`` names what trains).
 
 Classifier-free guidance needs the policy without a goal: that is goal = 0 (training drops the
