@@ -120,7 +120,7 @@ def goals(args) -> list[dict]:
     centroids, counts = caption_centroids(episodes, len(texts))
     present = torch.tensor(counts >= args.min_count)
     mean_goal = GoalEncoder.load(args.cclip, args.prior, sample_prior=False)
-    sampled = GoalEncoder.load(args.cclip, args.prior, sample_prior=True)
+    sampled = GoalEncoder(mean_goal.cclip, mean_goal.prior, sample_prior=True)  # load once
     rows = []
     for text in sorted({s.instruction for t in TASKS.values() for s in t.subtasks}):
         i = texts.index(text)
@@ -132,7 +132,7 @@ def goals(args) -> list[dict]:
             else None,
             "nearest": texts[int(nearest_captions(centroids, goal[None], present)[0])],
             "sampled_nearest_share": float((nearest_captions(centroids, draws, present) == i)
-                                           .float().mean()),
+                                           .float().mean()) if present[i] else None,
         })
         print(rows[-1], flush=True)
     return rows

@@ -48,7 +48,9 @@ def rank_of_caption(
     return int((sims > sims[caption]).sum())
 
 
-def nearest_captions(centroids: torch.Tensor, goals: torch.Tensor, present: torch.Tensor):
+def nearest_captions(
+    centroids: torch.Tensor, goals: torch.Tensor, present: torch.Tensor
+) -> torch.Tensor:
     """(N,) index of the nearest present centroid for each of N goals (N, D)."""
     sims = F.normalize(goals.float(), dim=-1) @ centroids.T
     return sims.masked_fill(~present, -2.0).argmax(1)
