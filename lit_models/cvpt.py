@@ -51,6 +51,7 @@ class CVPT(SequenceBC):
         memory_len: int | None = None,
         dropout: float | None = None,
         input_downsample: int | None = None,
+        head_hidden: int | None = None,
         tbptt_len: int = 64,
         lr: float = 5e-4,
         weight_decay: float = 1e-4,
@@ -74,6 +75,8 @@ class CVPT(SequenceBC):
             memory_len: TrXL memory and attention span in steps (None: 64).
             dropout: transformer dropout (None: 0).
             input_downsample: average-pool frames by this factor first (None: 1, the paper's).
+            head_hidden: width of the policy head's hidden layer (None: 0, one linear layer;
+                VPT's head has one, and C-Steve-1's head conditioning needs it).
             tbptt_len: window of truncated backprop; the sequence is cut into these.
             lr: peak AdamW learning rate (paper: 5e-4 tiny/base, 1e-4 large).
             weight_decay: AdamW decay for weight matrices (norms, biases, embeddings: none).
@@ -102,6 +105,7 @@ class CVPT(SequenceBC):
             "memory_len": memory_len,
             "dropout": dropout,
             "input_downsample": input_downsample,
+            "head_hidden": head_hidden,
         }
         self.config = CVPTConfig.from_name(
             model, **{k: v for k, v in overrides.items() if v is not None}

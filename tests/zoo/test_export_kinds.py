@@ -53,14 +53,16 @@ HALF_ATOL = 2e-2
 
 
 def _cvpt() -> tuple[nn.Module, dict]:
+    """With VPT's hidden head layer (the linear head: test_cvpt_export_without_kind_...)."""
     hparams = {
         "_class_path": "lit_models.cvpt.CVPT",
         "model": "tiny",
         "tbptt_len": 4,
         **CVPT_SIZES,
         "impala_channels": list(CVPT_SIZES["impala_channels"]),
+        "head_hidden": 8,
     }
-    return CVPTModel(CVPTConfig.from_name("tiny", **CVPT_SIZES)), hparams
+    return CVPTModel(CVPTConfig.from_name("tiny", **CVPT_SIZES, head_hidden=8)), hparams
 
 
 def _cclip() -> tuple[nn.Module, dict]:

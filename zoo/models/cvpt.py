@@ -47,6 +47,11 @@ class CVPTConfig:
     """Dropout in attention and feed-forward blocks."""
     value_head: bool = False
     """Add a scalar value head (unused by behaviour cloning; for RL fine-tuning)."""
+    head_hidden: int = 0
+    """Width of a hidden layer in the policy head (0: one linear layer). VPT's head has one
+    (LayerNorm, linear + ReLU, LayerNorm, then the logits); C-Steve-1's head conditioning
+    needs it: over a single linear head a goal can only shift the logits by the same amount in
+    every state."""
 
     @classmethod
     def from_name(cls, name: str, **overrides: Any) -> CVPTConfig:
@@ -112,14 +117,14 @@ class CVPTModel(nn.Module):
             memory_len=config.memory_len,
             dropout=config.dropout,
         )
-        self.policy_head = nn.Linear(config.d_model, config.num_actions)
+        self.policy_head = policy_head(config.d_model, config.head_hidden, config.num_actions)
         self.value = nn.Linear(config.d_model, 1) if config.value_head else None
 
     def get_num_params(self) -> int:
         return sum(p.numel() for p in self.parameters())
 
     def initial_state(self, batch: int, device: torch.device | str | None = None) -> TrXLState:
-        device = self.policy_head.weight.device if device is None else device
+        device = next(self.parameters()).device if device is None else device
         return self.trxl.initial_state(batch, device)
 
     def encode_frames(self, frames: torch.Tensor) -> torch.Tensor:
@@ -155,6 +160,21 @@ class CVPTModel(nn.Module):
         if self.value is None:
             raise RuntimeError("this model was built with value_head=False")
         return self.value(hidden).squeeze(-1)
+
+
+def policy_head(width: int, hidden: int, actions: int) -> nn.Module:
+    """Linear logits (hidden 0), or VPT's: LayerNorm -> Linear -> ReLU -> LayerNorm -> Linear."""
+    if hidden < 0:
+        raise ValueError(f"head_hidden={hidden} must be >= 0")
+    if hidden == 0:
+        return nn.Linear(width, actions)
+    return nn.Sequential(
+        nn.LayerNorm(width),
+        nn.Linear(width, hidden),
+        nn.ReLU(),
+        nn.LayerNorm(hidden),
+        nn.Linear(hidden, actions),
+    )
 
 
 __all__ = ["PAPER_PARAMS", "PRESETS", "CVPTConfig", "CVPTModel"]

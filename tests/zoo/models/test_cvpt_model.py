@@ -78,3 +78,15 @@ def test_input_downsample_sees_the_average_pooled_frame() -> None:
     assert half.get_num_params() < CVPTModel(CVPTConfig.from_name("tiny", **SMALL)).get_num_params()
     with pytest.raises(ValueError, match="input_downsample=5 must be >= 1 and divide frame_size=144"):
         CVPTModel(CVPTConfig.from_name("tiny", input_downsample=5))
+
+
+def test_vpt_head_has_its_hidden_layer_and_old_configs_keep_the_linear_head() -> None:
+    config = CVPTConfig.from_name("tiny", **SMALL, head_hidden=16)
+    head = CVPTModel(config).policy_head
+    assert [type(m).__name__ for m in head] == ["LayerNorm", "Linear", "ReLU", "LayerNorm", "Linear"]
+    assert head[1].weight.shape == (16, 32) and head[-1].weight.shape == (17, 16)
+    old = config.to_dict()
+    del old["head_hidden"]  # an export written before the field existed
+    assert isinstance(CVPTModel(CVPTConfig.from_dict(old)).policy_head, torch.nn.Linear)
+    with pytest.raises(ValueError, match="head_hidden=-1"):
+        CVPTModel(CVPTConfig.from_name("tiny", **SMALL, head_hidden=-1))

@@ -11,11 +11,11 @@ from zoo.models.steve import SteveConfig, SteveModel, combine_guidance
 GOAL_DIM = 8
 
 
-def _backbone(seed: int = 0) -> CVPTModel:
+def _backbone(seed: int = 0, head_hidden: int = 0) -> CVPTModel:
     torch.manual_seed(seed)
     config = CVPTConfig.from_name(
         "tiny", d_model=32, d_ff=64, n_layers=2, n_heads=2, encoder_hidden=32,
-        impala_channels=(4, 8, 8), memory_len=8, input_downsample=4,
+        impala_channels=(4, 8, 8), memory_len=8, input_downsample=4, head_hidden=head_hidden,
     )
     return CVPTModel(config).eval()
 
@@ -82,11 +82,15 @@ def test_goal_changes_the_policy_once_trained() -> None:
     assert not torch.allclose(a, b)
 
 
-@pytest.mark.parametrize("head_hidden", [0, 16])
-def test_head_goal_effect_depends_on_the_state_only_with_a_head_block(head_hidden: int) -> None:
+@pytest.mark.parametrize(("head_hidden", "backbone_head_hidden"), [(0, 0), (16, 0), (0, 16)])
+def test_head_goal_effect_depends_on_the_state_only_with_a_hidden_layer(
+    head_hidden: int, backbone_head_hidden: int
+) -> None:
     """Over C-VPT's linear head, head conditioning shifts every state's logits by the same
-    vector; the head block makes the shift state-dependent (and trains: the guard below)."""
-    steve = SteveModel(_backbone(), SteveConfig(goal_dim=GOAL_DIM, head_hidden=head_hidden))
+    vector; a hidden layer after the goal (C-Steve-1's head block, or the frozen VPT-style head
+    of the C-VPT) makes the shift state-dependent."""
+    backbone = _backbone(head_hidden=backbone_head_hidden)
+    steve = SteveModel(backbone, SteveConfig(goal_dim=GOAL_DIM, head_hidden=head_hidden))
     _randomise_trainable(steve)
     has_block = any(n.startswith("head_block.") for n in steve.trainable_parameters())
     assert has_block == (head_hidden > 0)
@@ -97,7 +101,7 @@ def test_head_goal_effect_depends_on_the_state_only_with_a_head_block(head_hidde
         uncond = steve.head(hidden + steve._goal_term(torch.zeros_like(goal), hidden))
     shift = (cond - uncond)[:, 0]
     spread = (shift - shift[0]).abs().max().item()
-    if head_hidden:
+    if head_hidden or backbone_head_hidden:
         assert spread > 0.1
     else:
         assert spread < 1e-5
