@@ -5,7 +5,9 @@ configs/csteve1_cpu.yaml):
   * one acting step of C-VPT (``CVPTPolicy.act``) against C-Steve-1 with classifier-free
     guidance (``StevePolicy.act``, both passes in one forward) and C-Steve-1 without guidance
     (cfg_scale 0), for head conditioning (the paper's) and TrXL-input conditioning (whose two
-    passes both run the Transformer-XL); goal: guidance costs <= 1.3x a C-VPT step;
+    passes both run the Transformer-XL), and head conditioning over a C-VPT with VPT's hidden
+    head layer (``head_hidden``; its C-VPT step is timed too); goal: guidance costs <= 1.3x a
+    C-VPT step;
   * one C-Steve-1 training step (LoRA + conditioning, encoder frozen) against one C-VPT
     training step on the same batch.
 Acting policies take turns step by step; each reports its fastest and median turn, and ratios
@@ -45,9 +47,12 @@ def _median_seconds(fn, repeats: int, warmup: int = 3) -> float:
     return statistics.median(times)
 
 
-def _backbone(seed: int = 0) -> CVPTModel:
+VPT_HEAD_HIDDEN = 256  # the VPT-head C-VPT of docs/results.md
+
+
+def _backbone(seed: int = 0, head_hidden: int = 0) -> CVPTModel:
     torch.manual_seed(seed)
-    return CVPTModel(CVPTConfig.from_name("tiny", input_downsample=2))
+    return CVPTModel(CVPTConfig.from_name("tiny", input_downsample=2, head_hidden=head_hidden))
 
 
 def acting(num_envs: int, repeats: int) -> dict:
@@ -57,17 +62,25 @@ def acting(num_envs: int, repeats: int) -> dict:
     frames = rng.integers(0, 256, (num_envs, 144, 144, 3), dtype=np.uint8)
     goals = torch.nn.functional.normalize(torch.randn(num_envs, 512), dim=-1)
     uniforms = rng.random(num_envs)
-    cvpt = CVPTPolicy(_backbone())
-    steps = {
-        "cvpt": _stepper(cvpt, num_envs, lambda p, s: p.act(frames, s, uniforms=uniforms)[1])
-    }
-    for conditioning in ("head", "trxl_input"):
+    steps = {}
+    for name, head_hidden in (("cvpt", 0), ("cvpt_vpthead", VPT_HEAD_HIDDEN)):
+        steps[name] = _stepper(
+            CVPTPolicy(_backbone(head_hidden=head_hidden)),
+            num_envs,
+            lambda p, s: p.act(frames, s, uniforms=uniforms)[1],
+        )
+    variants = (("head", 0, "head"), ("trxl_input", 0, "trxl_input"),
+                ("head", VPT_HEAD_HIDDEN, "head_vpthead"))
+    for conditioning, head_hidden, label in variants:
         for scale in (1.5, 0.0):
             steve = StevePolicy(
-                SteveModel(_backbone(), SteveConfig(goal_dim=512, conditioning=conditioning)),
+                SteveModel(
+                    _backbone(head_hidden=head_hidden),
+                    SteveConfig(goal_dim=512, conditioning=conditioning),
+                ),
                 cfg_scale=scale,
             )
-            steps[f"steve_{conditioning}_cfg{scale}"] = _stepper(
+            steps[f"steve_{label}_cfg{scale}"] = _stepper(
                 steve, num_envs, lambda p, s: p.act(frames, goals, s, uniforms=uniforms)[1]
             )
     times: dict[str, list[float]] = {name: [] for name in steps}
@@ -81,8 +94,10 @@ def acting(num_envs: int, repeats: int) -> dict:
     out = {f"{name}_min_s": min(t) for name, t in times.items()}
     out.update({f"{name}_median_s": statistics.median(t) for name, t in times.items()})
     for name in steps:
-        if name != "cvpt":
-            out[f"{name}_over_cvpt"] = out[f"{name}_min_s"] / out["cvpt_min_s"]
+        if name.startswith("steve"):  # against the C-VPT it is built on
+            base = "cvpt_vpthead" if "vpthead" in name else "cvpt"
+            out[f"{name}_over_cvpt"] = out[f"{name}_min_s"] / out[f"{base}_min_s"]
+    out["cvpt_vpthead_over_cvpt"] = out["cvpt_vpthead_min_s"] / out["cvpt_min_s"]
     return out
 
 

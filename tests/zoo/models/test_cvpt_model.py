@@ -83,7 +83,8 @@ def test_input_downsample_sees_the_average_pooled_frame() -> None:
 def test_vpt_head_has_its_hidden_layer_and_old_configs_keep_the_linear_head() -> None:
     config = CVPTConfig.from_name("tiny", **SMALL, head_hidden=16)
     head = CVPTModel(config).policy_head
-    assert [type(m).__name__ for m in head] == ["LayerNorm", "Linear", "ReLU", "LayerNorm", "Linear"]
+    layers = [type(m).__name__ for m in head]
+    assert layers == ["LayerNorm", "Linear", "ReLU", "LayerNorm", "Linear"]
     assert head[1].weight.shape == (16, 32) and head[-1].weight.shape == (17, 16)
     old = config.to_dict()
     del old["head_hidden"]  # an export written before the field existed
