@@ -53,7 +53,7 @@ HALF_ATOL = 2e-2
 
 
 def _cvpt() -> tuple[nn.Module, dict]:
-    """With VPT's hidden head layer (the linear head: test_cvpt_export_without_kind_...)."""
+    """With VPT's hidden head layer (the default linear head's reload: test_cvpt.py)."""
     hparams = {
         "_class_path": "lit_models.cvpt.CVPT",
         "model": "tiny",

@@ -8,9 +8,10 @@ C-Steve-1 is exactly the C-VPT it was built from, whatever the goal.
 
 VPT's policy head has a hidden layer (ReLU, linear + ReLU, LayerNorm, then the action logits), so
 a goal added before it changes the action distribution state by state. C-VPT's policy head is
-one linear layer; over it, head conditioning is W_head (W z + b): one logit offset per goal,
-the same in every state (an action prior, not a plan). ``head_hidden`` > 0 restores the
-hidden layer as a trainable residual block before the frozen head,
+one linear layer unless it was trained with ``CVPTConfig.head_hidden``; over a linear head,
+head conditioning is W_head (W z + b): one logit offset per goal, the same in every state (an
+action prior, not a plan). ``head_hidden`` > 0 here adds a hidden layer as a trainable residual
+block before the frozen head,
 x'' = x' + W_2 relu(W_1 LayerNorm(x') + b_1) + b_2 with W_2, b_2 zero at the start, so the
 goal's effect can depend on the state and the untrained model is still the backbone.
 
