@@ -62,17 +62,18 @@ def acting(num_envs: int, repeats: int) -> dict:
     frames = rng.integers(0, 256, (num_envs, 144, 144, 3), dtype=np.uint8)
     goals = torch.nn.functional.normalize(torch.randn(num_envs, 512), dim=-1)
     uniforms = rng.random(num_envs)
-    steps = {}
+    steps, base_of = {}, {}  # base_of: the C-VPT step each C-Steve-1 step is compared with
     for name, head_hidden in (("cvpt", 0), ("cvpt_vpthead", VPT_HEAD_HIDDEN)):
         steps[name] = _stepper(
             CVPTPolicy(_backbone(head_hidden=head_hidden)),
             num_envs,
             lambda p, s: p.act(frames, s, uniforms=uniforms)[1],
         )
-    variants = (("head", 0, "head"), ("trxl_input", 0, "trxl_input"),
-                ("head", VPT_HEAD_HIDDEN, "head_vpthead"))
-    for conditioning, head_hidden, label in variants:
+    variants = (("head", 0, "head", "cvpt"), ("trxl_input", 0, "trxl_input", "cvpt"),
+                ("head", VPT_HEAD_HIDDEN, "head_vpthead", "cvpt_vpthead"))
+    for conditioning, head_hidden, label, base in variants:
         for scale in (1.5, 0.0):
+            base_of[f"steve_{label}_cfg{scale}"] = base
             steve = StevePolicy(
                 SteveModel(
                     _backbone(head_hidden=head_hidden),
@@ -93,10 +94,8 @@ def acting(num_envs: int, repeats: int) -> dict:
     # the fastest turn is the step's own cost; medians also carry the other jobs' load
     out = {f"{name}_min_s": min(t) for name, t in times.items()}
     out.update({f"{name}_median_s": statistics.median(t) for name, t in times.items()})
-    for name in steps:
-        if name.startswith("steve"):  # against the C-VPT it is built on
-            base = "cvpt_vpthead" if "vpthead" in name else "cvpt"
-            out[f"{name}_over_cvpt"] = out[f"{name}_min_s"] / out[f"{base}_min_s"]
+    for name, base in base_of.items():
+        out[f"{name}_over_cvpt"] = out[f"{name}_min_s"] / out[f"{base}_min_s"]
     out["cvpt_vpthead_over_cvpt"] = out["cvpt_vpthead_min_s"] / out["cvpt_min_s"]
     return out
 

@@ -9,8 +9,8 @@ import pytest
 
 from zoo.envs.tasks import LONG_HORIZON_TASKS, SINGLE_STEP_TASKS, TASKS, make_task_env
 from zoo.eval.tasks import (
-    compare_success,
     TaskEpisode,
+    compare_success,
     evaluate_task,
     summarize_task,
     wilson_interval,
