@@ -55,8 +55,9 @@ class SteveDataModule(CrafterPlayDataModule):
         root: CrafterPlay folder (manifest.json + shards) or its URL (docs/data.md).
         embeddings: its ``zoo data embed`` folder (C-CLIP goal embeddings + step captions); a
             local folder.
-        relabel: ``event`` (the paper's event-based packing) or ``plain`` (STEVE-1's), for
-            the relabelling ablation.
+        relabel: ``event`` (the paper's event-based packing: the window's first caption
+            segment), ``event_any`` (any segment of the window, so an event also labels its
+            run-up) or ``plain`` (STEVE-1's), for the relabelling ablation.
         min_gap: fewest steps a goal lies ahead (paper: 1).
         max_gap: most steps a goal lies ahead (paper: 10).
         uncond_prob: share of pieces without a goal, for classifier-free guidance (paper: 0.1).

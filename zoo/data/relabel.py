@@ -14,13 +14,19 @@ Our reading of it, step by step, from the first step t of a piece:
    (so a goal is 1..max_gap steps ahead, counting the step itself);
 2. ``event``: the first event segment that reaches into the window is the goal's segment, and
    the goal is drawn uniformly from its steps inside the window. A segment after the window
-   is never used (it would break the gap); a window without any caption falls back to step 3;
+   is never used (it would break the gap); a window without any caption falls back to step 3.
+   ``event_any``: the goal's segment is drawn uniformly from all segments reaching into the
+   window, so an event also labels the steps that lead up to it (below);
 3. ``plain`` (and the fallback): the goal is drawn uniformly from the window (STEVE-1);
 4. every step t..g gets goal g; with probability ``uncond_prob`` the whole piece is
    unconditional instead (classifier-free guidance needs the policy without a goal); the next
    piece starts at g + 1.
 Taking the *first* segment in the window is what keeps one goal from spanning two events: the
 steps before "place table" are labelled with the table, not with the pickaxe made just after.
+Its cost, measured (docs/results.md, C-Steve-1): "craft stone pickaxe" then labels only steps
+where a table already stands, so the goal means "craft now" and a task that starts without a
+table is outside what it was trained on. ``event_any`` keeps goals inside event segments but
+lets the pickaxe also label the run-up that places the table.
 
 Step t's goal clip is o_{g-4..g+1} (``zoo data embed``), which holds the outcome of action g.
 """
@@ -32,8 +38,8 @@ from typing import Literal
 
 import numpy as np
 
-RelabelMode = Literal["event", "plain"]
-RELABEL_MODES: tuple[str, ...] = ("event", "plain")
+RelabelMode = Literal["event", "event_any", "plain"]
+RELABEL_MODES: tuple[str, ...] = ("event", "event_any", "plain")
 NO_CAPTION = -1
 
 
@@ -42,7 +48,8 @@ class RelabelParams:
     """The paper's C-Steve-1 table: min/max steps between goals 1/10, unconditional 0.1."""
 
     mode: RelabelMode = "event"
-    """``event``: goals inside caption segments (the paper's); ``plain``: STEVE-1's packing."""
+    """``event``: goals in the first caption segment of the window (the paper's); ``event_any``:
+    in any segment of the window; ``plain``: STEVE-1's packing."""
     min_gap: int = 1
     """Fewest steps a goal is ahead of the first step that gets it (the step itself counts)."""
     max_gap: int = 10
@@ -70,17 +77,31 @@ class Relabelling:
     from_event: np.ndarray  # (T,) bool, the goal was drawn inside an event segment
 
 
-def _segment_in_window(captions: np.ndarray, lo: int, hi: int) -> tuple[int, int] | None:
-    """First and last step (inclusive) of the first event segment's part inside [lo, hi]."""
-    events = np.flatnonzero(captions[lo : hi + 1] != NO_CAPTION)
-    if len(events) == 0:
+def _segments_in_window(captions: np.ndarray, lo: int, hi: int) -> list[tuple[int, int]]:
+    """First and last step (inclusive) of each event segment's part inside [lo, hi], in order."""
+    window = captions[lo : hi + 1]
+    starts = np.flatnonzero((window != NO_CAPTION) & (window != np.r_[NO_CAPTION, window[:-1]]))
+    ends = np.r_[starts[1:] - 1, len(window) - 1]
+    segments = []
+    for start, end in zip(starts, ends):
+        while window[end] != window[start]:  # trailing steps without a caption
+            end -= 1
+        segments.append((lo + int(start), lo + int(end)))
+    return segments
+
+
+def _goal_segment(
+    captions: np.ndarray, lo: int, hi: int, mode: RelabelMode, rng: np.random.Generator
+) -> tuple[int, int] | None:
+    """The event segment (its part in [lo, hi]) that holds the goal; None: draw in the window."""
+    if mode == "plain":
         return None
-    start = lo + int(events[0])
-    caption = captions[start]
-    end = start
-    while end < hi and captions[end + 1] == caption:
-        end += 1
-    return start, end
+    segments = _segments_in_window(captions, lo, hi)
+    if not segments:
+        return None
+    if mode == "event":
+        return segments[0]
+    return segments[int(rng.integers(len(segments)))]
 
 
 def relabel_episode(
@@ -102,7 +123,7 @@ def relabel_episode(
     while t < length:
         lo = min(t + params.min_gap - 1, length - 1)
         hi = min(t + params.max_gap - 1, length - 1)
-        segment = _segment_in_window(captions, lo, hi) if params.mode == "event" else None
+        segment = _goal_segment(captions, lo, hi, params.mode, rng)
         start, end = segment if segment is not None else (lo, hi)
         goal = int(rng.integers(start, end + 1))
         goal_step[t : goal + 1] = goal

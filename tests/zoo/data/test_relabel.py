@@ -23,7 +23,7 @@ def _random_captions(rng: np.random.Generator, length: int) -> np.ndarray:
     return np.array(out[:length])
 
 
-@pytest.mark.parametrize("mode", ["event", "plain"])
+@pytest.mark.parametrize("mode", ["event", "event_any", "plain"])
 def test_goals_lie_ahead_within_the_gap_and_cover_every_step(mode: str) -> None:
     params = RelabelParams(mode=mode, min_gap=3, max_gap=10)
     rng = np.random.default_rng(0)
@@ -69,6 +69,40 @@ def test_three_events_in_three_steps_get_three_goals() -> None:
     captions = np.array([NO_CAPTION, NO_CAPTION, table, pickaxe, sword, NO_CAPTION])
     out = relabel_episode(captions, RelabelParams(uncond_prob=0.0), np.random.default_rng(0))
     assert out.goal_step.tolist()[:5] == [2, 2, 2, 3, 4]
+
+
+def test_event_any_also_labels_the_run_up_to_a_later_event() -> None:
+    """Walking, then place table, then craft stone pickaxe: ``event`` only ever gives the first
+    step the walk's goal; ``event_any`` gives it each of the three events in turn."""
+    walk, table, pickaxe = 40, 13, 23
+    captions = np.array([walk] * 4 + [table, pickaxe] + [NO_CAPTION] * 10)
+    firsts = {"event": set(), "event_any": set()}
+    for mode, seen in firsts.items():
+        for seed in range(200):
+            out = relabel_episode(
+                captions, RelabelParams(mode=mode, uncond_prob=0.0), np.random.default_rng(seed)
+            )
+            seen.add(int(captions[out.goal_step[0]]))
+            assert out.from_event[0]
+    assert firsts == {"event": {walk}, "event_any": {walk, table, pickaxe}}
+
+
+def test_event_any_goals_stay_inside_a_segment_of_their_window() -> None:
+    params = RelabelParams(mode="event_any", min_gap=1, max_gap=10, uncond_prob=0.0)
+    rng = np.random.default_rng(5)
+    later = 0
+    for episode in range(50):
+        captions = _random_captions(rng, 300)
+        out = relabel_episode(captions, params, episode_rng(0, 0, episode))
+        for start, goal in _pieces(out.goal_step):
+            window = captions[start : min(start + params.max_gap, len(captions))]
+            if np.all(window == NO_CAPTION):
+                assert not out.from_event[start]
+                continue
+            assert out.from_event[start] and captions[goal] != NO_CAPTION
+            first = start + int(np.flatnonzero(window != NO_CAPTION)[0])
+            later += bool(np.any(captions[first : goal + 1] != captions[first]))
+    assert later > 100, "goals past the window's first segment must occur"
 
 
 def test_plain_packing_ignores_events() -> None:
