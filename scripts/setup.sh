@@ -16,4 +16,8 @@ esac
 .venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test]" 2>&1 | grep -v "^WARNING: Location" || true
 .venv/bin/python -c "import torch, torchvision, open_clip, lightning, jax, crafter, craftax, zoo" \
   || { echo "setup.sh: the environment does not import; see the pip output above" >&2; exit 1; }
+# Craftax writes its texture cache on first use; two first-time jobs at once (a `zoo data
+# generate` beside a `zoo data dagger`) race on that file and one reads it half-written.
+.venv/bin/python -c "from craftax.craftax_classic.constants import load_all_textures as t; t()" \
+  >/dev/null
 echo "setup.sh: .venv ready (torch $(.venv/bin/python -c 'import torch; print(torch.__version__)'))"
