@@ -17,13 +17,17 @@ def make_agent(
     cclip: str | None = None,
     prior: str | None = None,
     cfg_scale: float = 1.5,
+    expert_options: dict | None = None,
 ) -> Agent:
     """Build the named agent for ``num_envs`` envs; ``checkpoint`` is required by trained ones.
 
     ``temperature`` scales a sampling policy's logits (C-VPT, C-Steve-1); 0 plays the most
     likely action. C-Steve-1 reads text instructions through ``cclip`` (its C-CLIP checkpoint)
     and ``prior`` (the CVAE prior's), and guides with ``cfg_scale`` (paper: 1.5).
+    ``expert_options`` overrides the scripted expert's ``ExpertConfig`` fields.
     """
+    if expert_options and name != "scripted":
+        raise ValueError(f"expert options apply to the scripted expert only, not {name!r}")
     if temperature < 0:
         raise ValueError(f"temperature must be >= 0, got {temperature}")
     if temperature != 1.0 and name not in ("cvpt", "csteve1"):
@@ -33,7 +37,7 @@ def make_agent(
     if name == "scripted":
         from zoo.experts.scripted import ScriptedExpert
 
-        return ScriptedExpert(num_envs)
+        return ScriptedExpert(num_envs, **(expert_options or {}))
     if name in ("ppo", "cvpt", "csteve1") and checkpoint is None:
         kind = {
             "ppo": "a PPO expert checkpoint dir",

@@ -21,6 +21,29 @@ def _out_dir(text: str) -> Path:
     return path
 
 
+def _expert_option(text: str) -> tuple[str, object]:
+    """KEY=VALUE for an ExpertConfig field, VALUE parsed to the field's type."""
+    from dataclasses import fields
+
+    from zoo.experts.scripted.config import ExpertConfig
+
+    key, sep, raw = text.partition("=")
+    types = {f.name: type(f.default) for f in fields(ExpertConfig)}
+    if not sep or key not in types:
+        raise argparse.ArgumentTypeError(
+            f"expected KEY=VALUE with KEY one of {sorted(types)}, got {text!r}"
+        )
+    kind = types[key]
+    if kind is bool:
+        if raw.lower() not in ("true", "false"):
+            raise argparse.ArgumentTypeError(f"{key} takes true or false, got {raw!r}")
+        return key, raw.lower() == "true"
+    try:
+        return key, kind(raw)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{key} takes a {kind.__name__}, got {raw!r}") from None
+
+
 def _data_dir(text: str) -> Path:
     path = Path(text)
     if not path.is_dir():
@@ -43,6 +66,10 @@ def register(subparsers) -> None:
     )
     gen.add_argument("--expert", required=True, choices=AGENT_NAMES)
     gen.add_argument("--checkpoint", help="expert checkpoint (needed by --expert ppo)")
+    gen.add_argument("--expert-option", action="append", default=[], type=_expert_option,
+                     metavar="KEY=VALUE",
+                     help="override a scripted-expert tunable (zoo/experts/scripted/config.py), "
+                     "e.g. plants_first=true; repeatable; recorded in the manifest")
     _add_play_args(gen)
     gen.set_defaults(handler=_generate, _parser=gen)
 
@@ -133,11 +160,14 @@ def _generate(args) -> int:
         checkpoint = str(Path(args.checkpoint).resolve())
     elif args.expert == "ppo":
         args._parser.error("--expert ppo needs --checkpoint PATH")
+    if args.expert_option and args.expert != "scripted":
+        args._parser.error(f"--expert-option applies to --expert scripted, not {args.expert}")
     _check_frames(args)
     config = GenerationConfig(
         expert=args.expert, checkpoint=checkpoint, episodes=args.episodes, seed=args.seed,
         env=args.env, episodes_per_shard=args.episodes_per_shard,
         chunk_length=args.chunk_length, max_steps=args.max_steps, frames=args.frames,
+        expert_options=dict(args.expert_option) or None,
     )
     return _run_generation(config, args, "generate")
 

@@ -74,6 +74,8 @@ class GenerationConfig:
             frame as its residual against a re-render from the stored state, ~1/100 of the
             bytes for a re-render at decoding (``zoo.data.rerender``). None, not "stored",
             is kept so manifests written before this field compare equal.
+        expert_options: overrides of the scripted expert's ``ExpertConfig`` fields (e.g.
+            ``{"plants_first": True}``); None: its defaults (and older manifests compare equal).
     """
 
     expert: str
@@ -95,8 +97,15 @@ class GenerationConfig:
     mix: str | None = None
     round: int | None = None
     frames: str | None = None
+    expert_options: dict | None = None
 
     def __post_init__(self) -> None:
+        if self.expert_options == {}:
+            object.__setattr__(self, "expert_options", None)  # one spelling of "defaults"
+        if self.expert_options is not None and self.expert != "scripted":
+            raise ValueError(
+                f"expert_options apply to the scripted expert only, got expert={self.expert!r}"
+            )
         if self.frames == "stored":
             object.__setattr__(self, "frames", None)  # frozen; one spelling in the manifest
         if self.frames not in (None, "rendered"):
@@ -151,7 +160,10 @@ class ShardGenerator:
                 config.learner_temperature,
             )
         else:
-            self.agent = make_agent(config.expert, self.num_envs, config.checkpoint)
+            self.agent = make_agent(
+                config.expert, self.num_envs, config.checkpoint,
+                expert_options=config.expert_options,
+            )
         # rendered frames of a state-only expert are drawn once, by the re-render that codes them
         pixels = config.frames != "rendered" or getattr(self.agent, "needs_pixels", True)
         self.env = make_env(config.env, self.num_envs, pixels=pixels, max_steps=config.max_steps)

@@ -91,3 +91,37 @@ def test_bad_arguments_give_clear_errors(tmp_path, capsys, change, message):
 def test_info_on_a_folder_without_manifest(tmp_path, capsys):
     assert main(["data", "info", str(tmp_path)]) == 2
     assert "manifest.json not found" in capsys.readouterr().err
+
+
+def test_expert_options_reach_the_expert_and_the_manifest(tmp_path, capsys):
+    args = [*GENERATE, "--out", str(tmp_path / "play"), "--expert-option", "plants_first=true",
+            "--expert-option", "near=6"]
+    args[args.index("--expert") + 1] = "scripted"
+    assert main(args) == 0
+    manifest = json.loads((tmp_path / "play" / "manifest.json").read_text())
+    assert manifest["config"]["expert_options"] == {"plants_first": True, "near": 6}
+    args[-1] = "near=7"  # resuming with other options is refused like any other argument
+    assert main(args) == 2
+    assert "expert_options" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--expert-option", "plants_first=maybe"], "plants_first takes true or false, got 'maybe'"),
+        (["--expert-option", "near=far"], "near takes a int, got 'far'"),
+        (["--expert-option", "no_such_knob=1"], "expected KEY=VALUE with KEY one of"),
+        (["--expert-option", "plants_first"], "expected KEY=VALUE"),
+    ],
+)
+def test_bad_expert_options_give_clear_errors(tmp_path, capsys, extra, message):
+    with pytest.raises(SystemExit) as exit_info:
+        main([*GENERATE, "--out", str(tmp_path / "new"), *extra])
+    assert exit_info.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_expert_options_need_the_scripted_expert(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main([*GENERATE, "--out", str(tmp_path / "new"), "--expert-option", "plants_first=true"])
+    assert "--expert-option applies to --expert scripted, not random" in capsys.readouterr().err

@@ -97,6 +97,14 @@ def test_with_enough_wood_and_no_table_places_one():
     assert _act(_state(wood=9)) == Action.PLACE_TABLE
 
 
+def test_plants_first_collects_and_plants_a_sapling_before_the_table():
+    assert _act(_state(wood=9), plants_first=True) == Action.DO  # hit the grass it faces
+    assert _act(_state(wood=9, sapling=1), plants_first=True) == Action.PLACE_PLANT
+    planted = _state(wood=9)
+    planted["achievements"][0, Achievement.PLACE_PLANT] = True
+    assert _act(planted, plants_first=True) == Action.PLACE_TABLE  # then the tech tree
+
+
 def test_next_to_a_table_makes_the_wood_sword_first():
     state = _state(wood=9)
     state["map"][0, 11, 11] = Block.TABLE  # diagonal counts as nearby
@@ -200,6 +208,21 @@ def test_climbs_the_first_tech_steps_in_craftax(craftax_env):
     first_steps = (Achievement.COLLECT_WOOD, Achievement.PLACE_TABLE, Achievement.MAKE_WOOD_PICKAXE)
     for achievement in first_steps:
         assert done[:, achievement].all(), achievement.name
+
+
+def test_plants_first_plants_before_the_first_pickaxe(craftax_env):
+    """The imitation-data option: sapling and plant early in the episode, in both envs."""
+    expert = ScriptedExpert(2, plants_first=True)
+    step = craftax_env.reset(np.array([11, 12]))
+    expert.reset(np.array([11, 12]))
+    first = {}
+    for t in range(300):
+        step = craftax_env.step(expert.act(step))
+        for a in (Achievement.PLACE_PLANT, Achievement.MAKE_WOOD_PICKAXE):
+            for i in np.flatnonzero(step.state["achievements"][:, a]):
+                first.setdefault((a, int(i)), t)
+    for i in range(2):
+        assert first[(Achievement.PLACE_PLANT, i)] < first[(Achievement.MAKE_WOOD_PICKAXE, i)]
 
 
 def test_plays_original_crafter(crafter_env):

@@ -63,6 +63,9 @@ class ExpertConfig:
     iron_target: int = 2
     plants_wanted: int = 2
     """Saplings to plant early (crafter's mobs trample some)."""
+    plants_first: bool = False
+    """Collect a sapling and plant it before the first tools (normally a side goal after the
+    stone tools). For imitation data: a learner that dies in its first night still sees it."""
     tunnel_density: int = 20
     """Path tiles in the 9x9 box that make a cell count as tunnels (where skeletons spawn)."""
     tunnel_bias: float = 0.7

@@ -97,6 +97,7 @@ class EnvPlanner(SurvivalGoals):
             self._dusk_supplies,
             self._sleep,
             self._urgent_needs,
+            self._first_plant,
             self._basic_tools,
             self._first_stone,
             self._stone_tools,
@@ -141,6 +142,12 @@ class EnvPlanner(SurvivalGoals):
             if action is not None:
                 return action
         return None
+
+    def _first_plant(self, v: View) -> int | None:
+        """With ``plants_first``: a sapling and a plant before anything on the tech tree."""
+        if not self.cfg.plants_first or v.done(Ach.PLACE_PLANT):
+            return None
+        return self._plants(v)
 
     def _skeleton_ready(self, v: View) -> bool:
         """Skeletons shoot: chase them only armed (a stone sword kills in one hit) and healthy."""
