@@ -41,7 +41,7 @@ def _expert_option(text: str) -> tuple[str, object]:
     try:
         return key, kind(raw)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{key} takes a {kind.__name__}, got {raw!r}") from None
+        raise argparse.ArgumentTypeError(f"{key} takes {kind.__name__} values, got {raw!r}") from None
 
 
 def _data_dir(text: str) -> Path:

@@ -14,7 +14,7 @@ import os
 import shutil
 import traceback
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from multiprocessing.connection import Connection, wait
 from multiprocessing.process import BaseProcess
 from pathlib import Path
@@ -97,7 +97,7 @@ class GenerationConfig:
     mix: str | None = None
     round: int | None = None
     frames: str | None = None
-    expert_options: dict | None = None
+    expert_options: dict | None = field(default=None, hash=False)  # a dict: keep hash() working
 
     def __post_init__(self) -> None:
         if self.expert_options == {}:

@@ -109,7 +109,7 @@ def test_expert_options_reach_the_expert_and_the_manifest(tmp_path, capsys):
     ("extra", "message"),
     [
         (["--expert-option", "plants_first=maybe"], "plants_first takes true or false, got 'maybe'"),
-        (["--expert-option", "near=far"], "near takes a int, got 'far'"),
+        (["--expert-option", "near=far"], "near takes int values, got 'far'"),
         (["--expert-option", "no_such_knob=1"], "expected KEY=VALUE with KEY one of"),
         (["--expert-option", "plants_first"], "expected KEY=VALUE"),
     ],

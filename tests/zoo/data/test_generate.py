@@ -281,3 +281,12 @@ def test_other_arguments_into_same_folder_are_refused(crafter_dataset, tmp_path)
     with pytest.raises(DatasetMismatchError, match="seed: 7 there vs 8 now"):
         generate(dataclasses.replace(CRAFTER, seed=8), root, progress=False)
     assert json.loads((root / "manifest.json").read_text())["config"]["seed"] == 7
+
+
+def test_expert_options_are_part_of_equality_not_of_the_hash():
+    scripted = dataclasses.replace(CRAFTER, expert="scripted")
+    options = dataclasses.replace(scripted, expert_options={"plants_first": True})
+    assert options != scripted and hash(options) == hash(scripted)
+    assert dataclasses.replace(scripted, expert_options={}) == scripted  # {} means the defaults
+    with pytest.raises(ValueError, match="scripted expert only"):
+        dataclasses.replace(CRAFTER, expert_options={"plants_first": True})
