@@ -52,7 +52,8 @@ def data_sources(root: str | None, sources: list[dict] | None) -> tuple[list[str
     if (root is None) == (sources is None):
         raise ValueError(
             "give data.init_args.root (one CrafterPlay folder) or data.init_args.sources "
-            "([{root: DIR, weight: W}, ...]), exactly one of them"
+            "([{root: DIR, weight: W}, ...]), exactly one of them (to swap one for the other on "
+            "the command line, set the config's to null, e.g. --data.init_args.sources=null)"
         )
     if root is not None:
         return [str(root)], [1.0]

@@ -77,7 +77,7 @@ def test_a_new_folder_starts_a_new_episode_even_with_the_same_episode_index() ->
     "kwargs, message",
     [
         (dict(), "exactly one"),
-        (dict(root="x", sources=[{"root": "y"}]), "exactly one"),
+        (dict(root="x", sources=[{"root": "y"}]), r"exactly one.*--data.init_args.sources=null"),
         (dict(sources=[]), "empty"),
         (dict(sources=[{"weight": 1}]), r"sources\[0\]"),
         (dict(sources=[{"root": "a"}, {"root": "b", "weight": 0}]), r"sources\[1\].weight"),

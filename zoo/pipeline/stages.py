@@ -54,7 +54,8 @@ def plan(config: PipelineConfig, out: Path) -> list[Stage]:
         Stage("caption", ("generate",), caption, lambda keys: _caption(config, play, caption),
               checks.craftercaption, resumable=True),
         _fit("cvpt", config.cvpt_config, config.cvpt_args, runs, ("generate",),
-             lambda keys: [f"--data.init_args.root={play}"]),
+             # sources=null: the pipeline's own data replaces a config's several sources
+             lambda keys: [f"--data.init_args.root={play}", "--data.init_args.sources=null"]),
         _fit("cclip", config.cclip_config, config.cclip_args, runs, ("caption",),
              lambda keys: [f"--data.init_args.root={caption}"]),
         *(_score(config, evals, "scripted", game) for game in ENV_NAMES),
