@@ -6,7 +6,7 @@ from pathlib import Path
 
 from zoo.agents.base import Agent, RandomAgent
 
-AGENT_NAMES = ("random", "scripted", "ppo", "cvpt", "csteve1")
+AGENT_NAMES = ("random", "scripted", "ppo", "cvpt", "csteve1", "rl")
 
 
 def make_agent(
@@ -30,19 +30,22 @@ def make_agent(
         raise ValueError(f"expert options apply to the scripted expert only, not {name!r}")
     if temperature < 0:
         raise ValueError(f"temperature must be >= 0, got {temperature}")
-    if temperature != 1.0 and name not in ("cvpt", "csteve1"):
-        raise ValueError(f"temperature applies to the cvpt and csteve1 agents only, not {name!r}")
+    if temperature != 1.0 and name not in ("cvpt", "csteve1", "rl"):
+        raise ValueError(
+            f"temperature applies to the cvpt, csteve1 and rl agents only, not {name!r}"
+        )
     if name == "random":
         return RandomAgent(num_envs)
     if name == "scripted":
         from zoo.experts.scripted import ScriptedExpert
 
         return ScriptedExpert(num_envs, **(expert_options or {}))
-    if name in ("ppo", "cvpt", "csteve1") and checkpoint is None:
+    if name in ("ppo", "cvpt", "csteve1", "rl") and checkpoint is None:
         kind = {
             "ppo": "a PPO expert checkpoint dir",
             "cvpt": "a C-VPT .ckpt or export dir",
             "csteve1": "a C-Steve-1 .ckpt or export dir",
+            "rl": "a `zoo rl train` run dir or its checkpoints/update_*.pt",
         }[name]
         raise ValueError(f"agent {name!r} needs --checkpoint PATH ({kind})")
     if name == "ppo":
@@ -66,6 +69,13 @@ def make_agent(
         )
         goals = GoalEncoder.load(cclip, prior) if cclip is not None else None
         return SteveAgent(policy, goals, num_envs)
+    if name == "rl":
+        from zoo.agents.rl_agent import RLAgent
+
+        greedy = temperature == 0
+        return RLAgent.load(
+            checkpoint, num_envs, temperature=1.0 if greedy else temperature, greedy=greedy
+        )
     raise ValueError(f"unknown agent {name!r}; expected one of {AGENT_NAMES}")
 
 
@@ -75,9 +85,14 @@ def checkpoint_kind(path: str | Path) -> str:
     A PPO run or checkpoint folder has ``meta.json`` files; a ``zoo export`` folder has
     ``model.safetensors`` and names its kind in ``config.json`` (C-VPT or C-Steve-1 play; C-CLIP
     and the prior do not); a Lightning ``.ckpt`` file is a C-Steve-1 run when its
-    hyper-parameters name a backbone, otherwise a C-VPT run.
+    hyper-parameters name a backbone, otherwise a C-VPT run; a ``zoo rl train`` run folder
+    (config.yaml, checkpoints/update_*.pt) or one of its ``update_*.pt`` is an RL agent.
     """
     path = Path(path)
+    from zoo.agents.rl_agent import is_rl_checkpoint
+
+    if is_rl_checkpoint(path):
+        return "rl"
     if path.is_file() and path.suffix == ".ckpt":
         from zoo.agents.steve_agent import is_steve_checkpoint, read_checkpoint
 
@@ -97,7 +112,8 @@ def checkpoint_kind(path: str | Path) -> str:
             return "ppo"
     raise ValueError(
         f"cannot tell what {path} holds: expected a C-VPT/C-Steve-1 .ckpt, a `zoo export` folder "
-        "(model.safetensors) or a PPO checkpoint/run folder (meta.json); pass --agent"
+        "(model.safetensors), a PPO checkpoint/run folder (meta.json) or a `zoo rl train` run "
+        "(config.yaml + checkpoints/update_*.pt); pass --agent"
     )
 
 

@@ -42,7 +42,11 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--agent", choices=AGENT_NAMES, help="who plays (from zoo.agents.AGENT_NAMES)")
-    p.add_argument("--checkpoint", type=Path, help="checkpoint of a trained agent (e.g. ppo)")
+    p.add_argument(
+        "--checkpoint", type=Path,
+        help="a trained agent: C-VPT or C-Steve-1 .ckpt/export, PPO expert run, or a "
+        "`zoo rl train` run folder (its newest checkpoint) or one of its checkpoints/update_*.pt",
+    )
     p.add_argument("--env", choices=ENV_NAMES, required=True, help="game to play in")
     p.add_argument("--episodes", type=positive_int, default=100, help="episodes (default 100)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="run seed (default 0)")
@@ -59,7 +63,8 @@ def register(subparsers) -> None:
     )
     p.add_argument(
         "--temperature", type=float, default=1.0,
-        help="C-VPT: sample from softmax(logits / T) (default 1); 0 plays the most likely action",
+        help="C-VPT, C-Steve-1, zoo rl agents: sample from softmax(logits / T) (default 1); 0 "
+        "plays the most likely action",
     )
     p.add_argument(
         "--cclip", type=Path, metavar="CKPT",

@@ -12,20 +12,31 @@ from zoo.rl.policies import CVPTRLPolicy, FrameEncoder, RecurrentActorCritic
 FRAME_SIZE = 144
 
 
+def build_pixel_policy(config: RLConfig) -> nn.Module:
+    """The freshly initialised network of a pixel agent (PPO-RNN or C-VPT-RL): what a run
+    starts from, and what ``zoo eval`` loads a run's trained parameters into."""
+    if config.agent == "ppo_rnn":
+        hidden = config.hidden_size
+        encoder = FrameEncoder(FRAME_SIZE, config.input_downsample, hidden)
+        return RecurrentActorCritic(encoder, hidden, hidden, NUM_ACTIONS).to(config.device)
+    if config.agent == "cvpt_rl":
+        from zoo.export import load_policy_model
+
+        model = load_policy_model(config.checkpoint)
+        return CVPTRLPolicy(model, config.lora_rank, config.lora_alpha).to(config.device)
+    raise ValueError(
+        f"agent {config.agent!r} does not act on pixels alone (PPO-Steve's planner acts through "
+        "C-Steve-1 in its own env); expected ppo_rnn or cvpt_rl"
+    )
+
+
 def build_agent(config: RLConfig, next_episode: int = 0, sampling_seed: int = 0):
     """(env, policy) for ``config``; episodes are numbered from ``next_episode`` (a resume),
     and PPO-Steve's executor samples its actions from ``sampling_seed``."""
     tasks = TaskVecEnv.make(config.task, config.env, config.num_envs, config.seed, next_episode)
     hidden = config.hidden_size
-    if config.agent == "ppo_rnn":
-        encoder = FrameEncoder(FRAME_SIZE, config.input_downsample, hidden)
-        return tasks, RecurrentActorCritic(encoder, hidden, hidden, NUM_ACTIONS).to(config.device)
-    if config.agent == "cvpt_rl":
-        from zoo.export import load_policy_model
-
-        model = load_policy_model(config.checkpoint)
-        policy = CVPTRLPolicy(model, config.lora_rank, config.lora_alpha)
-        return tasks, policy.to(config.device)
+    if config.agent in ("ppo_rnn", "cvpt_rl"):
+        return tasks, build_pixel_policy(config)
     from zoo.agents.steve_agent import GoalEncoder, StevePolicy
     from zoo.captions.vocabulary import load_vocabulary
 

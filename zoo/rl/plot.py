@@ -15,7 +15,8 @@ LABELS = {"ppo_rnn": "PPO-RNN", "cvpt_rl": "C-VPT-RL", "ppo_steve": "PPO-Steve"}
 
 
 def read_run(run_dir: str | Path) -> tuple[dict, np.ndarray, np.ndarray]:
-    """(config, env steps, success rate over the last 100 episodes) of one ``zoo rl`` run."""
+    """(config, env steps, success rate of the logged window) of one ``zoo rl`` run (runs
+    logged before 2026-12-03's fix counted the last 100 episodes to end, biased to short ones)."""
     run_dir = Path(run_dir)
     config_path, metrics_path = run_dir / "config.yaml", run_dir / "metrics.csv"
     if not config_path.is_file() or not metrics_path.is_file():
@@ -79,7 +80,7 @@ def plot_runs(
             table.setdefault(task, {})[label] = {"success_rate": rate, "fixed": True}
         ax.set_title(task)
         ax.set_xlabel("env steps")
-        ax.set_ylabel("success rate (last 100 episodes)")
+        ax.set_ylabel("success rate (100 episodes, seed order)")
         ax.set_ylim(-0.02, 1.02)
         ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()

@@ -1,11 +1,13 @@
 """The PPO loop shared by the three agents: rollout, GAE, clipped updates, logs, checkpoints.
 
-A run directory holds ``config.yaml``, ``metrics.csv`` (one row per update), optional W&B
-files, and ``checkpoints/update_*.pt`` with the trainable parameters, the optimizer, the
+A run directory holds ``config.yaml``, ``metrics.csv`` (one row per update; its success window
+is ``zoo.rl.window.SeedOrderWindow``'s, not "the last 100 that ended"), ``episodes.csv`` (one
+row per ended episode: the update it ended in, its seed index, success, sub-tasks, length),
+optional W&B files, and ``checkpoints/update_*.pt`` with the trainable parameters, the optimizer, the
 update and env-step counts, the episode counter and the sampling generator: ``--resume``
 continues at the same env step with the same optimizer state (``total_env_steps`` may grow,
 to extend a run; every other setting must match). Episodes in flight at the
-checkpoint are dropped (not counted), as are metrics rows logged after it; the resumed run
+checkpoint are dropped (not counted), as are metrics and episode rows logged after it; the resumed run
 starts fresh episodes with the next episode seeds and a fresh 100-episode success window.
 """
 
@@ -15,7 +17,7 @@ import csv
 import math
 import os
 import time
-from collections import deque
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +29,7 @@ from zoo.rl.agents import build_agent
 from zoo.rl.config import RLConfig
 from zoo.rl.policies import count_parameters
 from zoo.rl.ppo import explained_variance, gae, ppo_loss
+from zoo.rl.window import SeedOrderWindow
 
 COLUMNS = (
     "update", "env_steps", "episodes", "success_rate", "success_rate_100", "subtasks_100",
@@ -34,6 +37,7 @@ COLUMNS = (
     "clip_fraction", "explained_variance", "lr", "env_steps_per_s", "env_share", "model_share",
     "update_share", "wall_seconds",
 )
+EPISODE_COLUMNS = ("update", "episode", "success", "subtasks", "length")
 KEEP_CHECKPOINTS = 2
 
 
@@ -93,14 +97,11 @@ def train_rl(
     optimizer = torch.optim.Adam(params, lr=config.lr, eps=1e-5)
     generator = torch.Generator().manual_seed(config.seed)
     env_steps, wall, episodes = 0, 0.0, 0
+    base = base_sha256(config)
     if saved:
-        unexpected = policy.load_state_dict(saved["trainable"], strict=False).unexpected_keys
-        absent = sorted({n for n, p in policy.named_parameters() if p.requires_grad}
-                        - set(saved["trainable"]))
-        if unexpected or absent:
-            raise ValueError(f"{found[-1]} does not fit this agent: unexpected parameters "
-                             f"{unexpected[:5]}, trained parameters it lacks {absent[:5]}")
-        _drop_rows_after(out / "metrics.csv", saved["update"])
+        load_trainable(policy, saved, found[-1], base)
+        _drop_rows_after(out / "metrics.csv", COLUMNS, saved["update"])
+        _drop_rows_after(out / "episodes.csv", EPISODE_COLUMNS, saved["update"])
         optimizer.load_state_dict(saved["optimizer"])
         generator.set_state(saved["generator"])
         env_steps, wall, episodes = saved["env_steps"], saved["wall_seconds"], saved["episodes"]
@@ -115,17 +116,14 @@ def train_rl(
 
     bar = tqdm(total=config.num_updates, initial=start, unit="update", disable=not progress,
                desc=f"{config.agent} {config.task}")
-    recent: deque = deque(maxlen=100)
+    recent = SeedOrderWindow(100, start=env.next_episode)
     n = config.num_envs
     t = env.reset()
     x, first = policy.preprocess(t.obs), torch.as_tensor(t.first)
     state = policy.initial_state(n)
     record = None
-    new_file = not (out / "metrics.csv").exists()
-    with (out / "metrics.csv").open("a", newline="") as f:
-        writer = csv.DictWriter(f, COLUMNS)
-        if new_file:
-            writer.writeheader()
+    with _csv_log(out / "metrics.csv", COLUMNS) as writer, \
+            _csv_log(out / "episodes.csv", EPISODE_COLUMNS) as episode_writer:
         for update in range(start, config.num_updates):
             lr = config.lr * (1 - update / config.num_updates) if config.anneal_lr else config.lr
             for group in optimizer.param_groups:
@@ -167,16 +165,16 @@ def train_rl(
             update_time = time.perf_counter() - tick
             seconds = time.perf_counter() - began
             wall += seconds
-            recent.extend(finished)
+            recent.add(finished)
             episodes += len(finished)
             record = {
                 "update": update + 1,
                 "env_steps": env_steps,
                 "episodes": episodes,
                 "success_rate": _mean([e.success for e in finished]),
-                "success_rate_100": _mean([e.success for e in recent]),
-                "subtasks_100": _mean([e.subtasks_done for e in recent]),
-                "episode_length_100": _mean([e.length for e in recent]),
+                "success_rate_100": _mean([e.success for e in recent.episodes]),
+                "subtasks_100": _mean([e.subtasks_done for e in recent.episodes]),
+                "episode_length_100": _mean([e.length for e in recent.episodes]),
                 **losses,
                 "explained_variance": explained_variance(data["value"], returns),
                 "lr": lr,
@@ -188,8 +186,11 @@ def train_rl(
                 "trainable_parameters": trainable,  # not in metrics.csv: the same every row
                 "total_parameters": total,
             }
+            episode_writer.writerows(
+                {"update": update + 1, "episode": e.episode, "success": int(e.success),
+                 "subtasks": e.subtasks_done, "length": e.length} for e in finished
+            )
             writer.writerow({k: _csv(record[k]) for k in COLUMNS})
-            f.flush()
             if wandb_run is not None:
                 wandb_run.log({k: v for k, v in record.items() if _finite(v)}, step=env_steps)
             bar.update(1)
@@ -197,7 +198,8 @@ def train_rl(
                             sps=f"{record['env_steps_per_s']:.0f}")
             if (update + 1) % config.checkpoint_every == 0 or update + 1 == config.num_updates:
                 counts = {"update": update + 1, "env_steps": env_steps, "episodes": episodes,
-                          "next_episode": env.next_episode, "wall_seconds": wall}
+                          "next_episode": env.next_episode, "wall_seconds": wall,
+                          "base_sha256": base}
                 _save(out, config, policy, optimizer, generator, counts)
     bar.close()
     if wandb_run is not None:
@@ -237,12 +239,26 @@ def _optimize(config, policy, optimizer, params, data, advantages, returns, stat
     }
 
 
-def _drop_rows_after(path: Path, update: int) -> None:
+@contextmanager
+def _csv_log(path: Path, columns: tuple[str, ...]):
+    """An appending CSV writer (header on a new file), line-buffered so a killed run keeps
+    every row it logged."""
+    new_file = not path.exists()
+    with path.open("a", newline="", buffering=1) as f:
+        writer = csv.DictWriter(f, columns)
+        if new_file:
+            writer.writeheader()
+        yield writer
+
+
+def _drop_rows_after(path: Path, columns: tuple[str, ...], update: int) -> None:
     """Forget the rows a killed run logged after its last checkpoint: the resume redoes them."""
+    if not path.exists():  # a run from before episodes.csv existed
+        return
     with path.open(newline="") as f:
         rows = [r for r in csv.DictReader(f) if int(r["update"]) <= update]
     with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, COLUMNS)
+        writer = csv.DictWriter(f, columns)
         writer.writeheader()
         writer.writerows(rows)
 
@@ -254,13 +270,41 @@ def _save(out, config, policy, optimizer, generator, counts: dict[str, Any]) -> 
     trainable = {k: v for k, v in policy.state_dict().items()
                  if k in {n for n, p in policy.named_parameters() if p.requires_grad}}
     payload = {
-        "config": config.to_dict(), **counts, "trainable": trainable, "optimizer": optimizer.state_dict(), "generator": generator.get_state(),
+        "config": config.to_dict(), **counts, "trainable": trainable,
+        "optimizer": optimizer.state_dict(), "generator": generator.get_state(),
     }
     tmp = folder / f"update_{update:06d}.pt.tmp"
     torch.save(payload, tmp)
     tmp.rename(folder / f"update_{update:06d}.pt")
     for old in list_checkpoints(out)[:-KEEP_CHECKPOINTS]:
         old.unlink()
+
+
+def load_trainable(policy: torch.nn.Module, saved: dict, path: Path, base: str | None) -> None:
+    """Put a checkpoint's trained parameters into ``policy`` (built from the same config), after
+    checking that they fit it and that its frozen base model (sha256 ``base``) is the one they
+    were trained on."""
+    if saved.get("base_sha256") not in (None, base):
+        raise ValueError(
+            f"{path} was trained on other weights than its checkpoint path holds now (sha256 "
+            f"{saved['base_sha256'][:12]}..., now {str(base)[:12]}...): restore those weights"
+        )
+    unexpected = policy.load_state_dict(saved["trainable"], strict=False).unexpected_keys
+    absent = sorted({n for n, p in policy.named_parameters() if p.requires_grad}
+                    - set(saved["trainable"]))
+    if unexpected or absent:
+        raise ValueError(f"{path} does not fit this agent: unexpected parameters "
+                         f"{unexpected[:5]}, trained parameters it lacks {absent[:5]}")
+
+
+def base_sha256(config: RLConfig) -> str | None:
+    """Fingerprint of the frozen model a run's trainable parameters sit on (C-VPT, C-Steve-1),
+    so loading them onto other weights that share the path is refused."""
+    if config.checkpoint is None:
+        return None
+    from zoo.export import checkpoint_sha256
+
+    return checkpoint_sha256(config.checkpoint)
 
 
 def _mean(values: list) -> float:

@@ -87,7 +87,7 @@ def test_eval_in_craftax(tmp_path):
 
 def test_temperature_is_only_for_sampling_policies(tmp_path, capsys):
     assert main(eval_args(tmp_path / "run", "--temperature", "0.5")) == 2
-    assert "temperature applies to the cvpt and csteve1 agents only, not 'random'" in capsys.readouterr().err
+    assert "temperature applies to the cvpt, csteve1 and rl agents only, not 'random'" in capsys.readouterr().err
     assert main(eval_args(tmp_path / "run", "--temperature", "-1")) == 2
     assert "temperature must be >= 0" in capsys.readouterr().err
 

@@ -19,8 +19,8 @@ TINY = RLConfig(
 )
 
 
-def _rows(run) -> list[dict]:
-    with (run / "metrics.csv").open() as f:
+def _rows(run, name: str = "metrics.csv") -> list[dict]:
+    with (run / name).open() as f:
         return list(csv.DictReader(f))
 
 
@@ -41,6 +41,8 @@ def test_a_run_logs_every_update_and_repeats_from_its_seed(tmp_path):
     assert a.keys() == b.keys()
     assert all(torch.equal(a[k], b[k]) for k in a)
     assert [r["policy_loss"] for r in rows] == [r["policy_loss"] for r in _rows(tmp_path / "b")]
+    episodes = _rows(tmp_path / "a", "episodes.csv")  # one row per ended episode
+    assert len(episodes) == int(rows[-1]["episodes"])
 
 
 def test_resume_continues_the_step_count_and_the_optimizer_state(tmp_path):
@@ -54,9 +56,12 @@ def test_resume_continues_the_step_count_and_the_optimizer_state(tmp_path):
         train_rl(TINY.replace(lr=1.0), run, resume=True, progress=False)
     with (run / "metrics.csv").open("a") as f:  # a row logged after the checkpoint, then killed
         f.write("2" + ",16" + "," * (len(_rows(run)[0]) - 2) + "\n")
+    with (run / "episodes.csv").open("a") as f:
+        f.write("2,999,1,2,7\n")
     train_rl(TINY, run, resume=True, progress=False)
     rows = _rows(run)
     assert [(int(r["update"]), int(r["env_steps"])) for r in rows] == [(1, 8), (2, 16)]
+    assert "999" not in [r["episode"] for r in _rows(run, "episodes.csv")]
     last = torch.load(list_checkpoints(run)[-1], weights_only=False)
     assert (last["update"], last["env_steps"]) == (2, 16)
     steps_before = [s["step"] for s in first["optimizer"]["state"].values()]
