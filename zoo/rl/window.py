@@ -38,5 +38,6 @@ class SeedOrderWindow:
 
     @property
     def episodes(self) -> list:
-        """The window's episodes, oldest first (empty until episode ``start`` has ended)."""
-        return list(self._window)
+        """The window's episodes, oldest first; empty until it holds ``size`` of them (a
+        window of the first few would be the noisiest number of the run)."""
+        return list(self._window) if len(self._window) == self._window.maxlen else []
