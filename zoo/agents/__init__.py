@@ -70,12 +70,10 @@ def make_agent(
         goals = GoalEncoder.load(cclip, prior) if cclip is not None else None
         return SteveAgent(policy, goals, num_envs)
     if name == "rl":
-        from zoo.agents.rl_agent import RLAgent
+        from zoo.agents.rl_agent import load_rl_agent
 
         greedy = temperature == 0
-        return RLAgent.load(
-            checkpoint, num_envs, temperature=1.0 if greedy else temperature, greedy=greedy
-        )
+        return load_rl_agent(checkpoint, num_envs, 1.0 if greedy else temperature, greedy)
     raise ValueError(f"unknown agent {name!r}; expected one of {AGENT_NAMES}")
 
 

@@ -1,5 +1,5 @@
-"""Play a ``zoo rl train`` checkpoint (PPO-RNN, C-VPT-RL) as an ``Agent``, so ``zoo eval`` scores
-it on the same fixed episode seeds as every other agent.
+"""Play a ``zoo rl train`` checkpoint (PPO-RNN, C-VPT-RL, PPO-Steve) as an ``Agent``, so
+``zoo eval`` scores it on the same fixed episode seeds as every other agent.
 
 The training log's success rates come from the run's own rollouts (other seeds, a policy that
 changes while they run); this is the held-out number to put in a table.
@@ -14,6 +14,7 @@ import torch
 
 from zoo.agents.cvpt_agent import sample_actions
 from zoo.envs.base import Step
+from zoo.rl.envs import CaptionExecutor, planner_observation
 
 
 def find_rl_checkpoint(path: str | Path) -> Path:
@@ -34,6 +35,35 @@ def is_rl_checkpoint(path: str | Path) -> bool:
     return path.is_file() and path.suffix == ".pt" and path.name.startswith("update_")
 
 
+def load_rl_agent(path: str | Path, num_envs: int, temperature: float = 1.0, greedy: bool = False):
+    """The agent of an ``update_*.pt`` or a run folder (its newest checkpoint): ``RLAgent`` for
+    PPO-RNN and C-VPT-RL, ``PlannerAgent`` for PPO-Steve."""
+    from zoo.rl.agents import build_pixel_policy, load_executor, planner_network
+    from zoo.rl.config import RLConfig
+    from zoo.rl.train import base_sha256, load_trainable
+
+    path = find_rl_checkpoint(path)
+    saved = torch.load(path, map_location="cpu", weights_only=False)
+    if not isinstance(saved, dict) or not {"config", "trainable"} <= saved.keys():
+        raise ValueError(f"{path} is not a `zoo rl train` checkpoint (no config/trainable)")
+    config = RLConfig.from_dict(saved["config"], source=str(path))
+    if config.agent == "ppo_steve":
+        steve, goals = load_executor(config)
+        executor = CaptionExecutor(steve, goals)
+        policy = planner_network(executor.feature_dim + len(goals), config.hidden_size, len(goals))
+    else:
+        policy = build_pixel_policy(config)
+    load_trainable(policy, saved, path, base_sha256(config))
+    if config.agent == "ppo_steve":
+        return PlannerAgent(policy, executor, config.option_steps, num_envs, temperature, greedy)
+    return RLAgent(policy, config.agent, num_envs, temperature, greedy)
+
+
+def _check_temperature(temperature: float) -> None:
+    if temperature <= 0:
+        raise ValueError(f"temperature must be > 0, got {temperature}")
+
+
 class RLAgent:
     """A trained PPO policy for N envs; samples softmax(logits / temperature) from each env's
     seeded stream (or plays the argmax when ``greedy``), carries its recurrent state and
@@ -43,30 +73,13 @@ class RLAgent:
 
     def __init__(self, policy, name: str, num_envs: int, temperature: float = 1.0,
                  greedy: bool = False) -> None:
-        if temperature <= 0:
-            raise ValueError(f"temperature must be > 0, got {temperature}")
+        _check_temperature(temperature)
         self.policy = policy.eval()
         self.name, self.num_envs = name, num_envs
         self.temperature, self.greedy = temperature, greedy
         self._state = policy.initial_state(num_envs)
         self._first = np.ones(num_envs, dtype=bool)
         self._rngs = [np.random.default_rng(0) for _ in range(num_envs)]
-
-    @classmethod
-    def load(cls, path: str | Path, num_envs: int, **kwargs) -> RLAgent:
-        """From an ``update_*.pt`` or a run folder (its newest checkpoint)."""
-        from zoo.rl.agents import build_pixel_policy
-        from zoo.rl.config import RLConfig
-        from zoo.rl.train import base_sha256, load_trainable
-
-        path = find_rl_checkpoint(path)
-        saved = torch.load(path, map_location="cpu", weights_only=False)
-        if not isinstance(saved, dict) or not {"config", "trainable"} <= saved.keys():
-            raise ValueError(f"{path} is not a `zoo rl train` checkpoint (no config/trainable)")
-        config = RLConfig.from_dict(saved["config"], source=str(path))
-        policy = build_pixel_policy(config)
-        load_trainable(policy, saved, path, base_sha256(config))
-        return cls(policy, config.agent, num_envs, **kwargs)
 
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> None:
         for i in range(self.num_envs) if mask is None else np.flatnonzero(mask):
@@ -82,4 +95,55 @@ class RLAgent:
         self._state, self._first[:] = out.state, False
         uniforms = np.array([rng.random() for rng in self._rngs])
         actions = sample_actions(out.logits, self.temperature, self.greedy, uniforms)
+        return actions.astype(np.int32)
+
+
+class PlannerAgent:
+    """PPO-Steve as a fixed agent: every ``option_steps`` steps of an env (and at its episode
+    start) the planner picks a caption from C-Steve-1's feature and the caption it picked last,
+    and C-Steve-1 follows it. Unlike training's ``PlannerEnv``, a new episode starts a new option
+    at once (no noop wait for the old option to run out). Both the caption and the action are
+    sampled from each env's seeded stream."""
+
+    name = "ppo_steve"
+    needs_pixels = True
+
+    def __init__(self, planner, executor, option_steps: int, num_envs: int,
+                 temperature: float = 1.0, greedy: bool = False) -> None:
+        _check_temperature(temperature)
+        self.planner, self.executor = planner.eval(), executor
+        self.option_steps, self.num_envs = option_steps, num_envs
+        self.temperature, self.greedy = temperature, greedy
+        self.num_captions = len(executor.goals)
+        executor.reset(num_envs)
+        self._planner_state = planner.initial_state(num_envs)
+        self._first = np.ones(num_envs, dtype=bool)
+        self._clock = np.zeros(num_envs, np.int64)
+        self.choice = np.full(num_envs, -1)
+        self._rngs = [np.random.default_rng(0) for _ in range(num_envs)]
+
+    def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> None:
+        for i in range(self.num_envs) if mask is None else np.flatnonzero(mask):
+            self._rngs[i] = np.random.default_rng(int(seeds[i]))
+            self._first[i], self._clock[i], self.choice[i] = True, 0, -1
+
+    @torch.no_grad()
+    def act(self, step: Step) -> np.ndarray:
+        if step.frames is None:
+            raise ValueError("PlannerAgent plays from pixels: make the env with pixels=True")
+        hidden = self.executor.observe(step.frames, self._first)
+        due = np.flatnonzero(self._clock % self.option_steps == 0)
+        if len(due):
+            index = torch.as_tensor(due)
+            obs = planner_observation(hidden, self.choice, self.num_captions)[index]
+            out = self.planner.step(obs, torch.as_tensor(self._first[due]),
+                                    self.planner.select_state(self._planner_state, index))
+            self._planner_state[index] = out.state
+            uniforms = np.array([self._rngs[i].random() for i in due])
+            self.choice[due] = sample_actions(out.logits, 1.0, self.greedy, uniforms)
+        uniforms = np.array([rng.random() for rng in self._rngs])
+        logits = self.executor.logits(self.choice)
+        actions = sample_actions(logits, self.temperature, self.greedy, uniforms)
+        self._clock += 1
+        self._first[:] = False
         return actions.astype(np.int32)

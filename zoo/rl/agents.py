@@ -37,14 +37,23 @@ def build_agent(config: RLConfig, next_episode: int = 0, sampling_seed: int = 0)
     hidden = config.hidden_size
     if config.agent in ("ppo_rnn", "cvpt_rl"):
         return tasks, build_pixel_policy(config)
+    steve, goals = load_executor(config)
+    env = PlannerEnv(tasks, steve, goals, config.option_steps, sampling_seed)
+    return env, planner_network(env.obs_dim, hidden, env.num_actions).to(config.device)
+
+
+def load_executor(config: RLConfig):
+    """PPO-Steve's frozen C-Steve-1 (with the config's CFG scale) and the goal of each of the
+    61 captions: the prior's mean goal of its text, as ``zoo play`` gives text to C-Steve-1."""
     from zoo.agents.steve_agent import GoalEncoder, StevePolicy
     from zoo.captions.vocabulary import load_vocabulary
 
     steve = StevePolicy.load(config.checkpoint, config.device, cfg_scale=config.cfg_scale)
     encoder = GoalEncoder.load(config.cclip, config.prior, sample_prior=False)
-    goals = encoder.from_caption_ids(list(range(len(load_vocabulary().texts()))))
-    env = PlannerEnv(tasks, steve, goals, config.option_steps, sampling_seed)
-    planner_input = nn.Sequential(nn.Linear(env.obs_dim, hidden), nn.ReLU())
-    return env, RecurrentActorCritic(planner_input, hidden, hidden, env.num_actions).to(
-        config.device
-    )
+    return steve, encoder.from_caption_ids(list(range(len(load_vocabulary().texts()))))
+
+
+def planner_network(obs_dim: int, hidden: int, num_captions: int) -> RecurrentActorCritic:
+    """PPO-Steve's planner: a dense layer on its observation, a GRU, caption logits, value."""
+    planner_input = nn.Sequential(nn.Linear(obs_dim, hidden), nn.ReLU())
+    return RecurrentActorCritic(planner_input, hidden, hidden, num_captions)

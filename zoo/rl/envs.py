@@ -99,6 +99,63 @@ class TaskVecEnv:
         return Transition(frames, reward, done, done.copy(), self.num_envs, finished)
 
 
+class CaptionExecutor:
+    """Frozen C-Steve-1 (with classifier-free guidance) following one caption per env, a step at
+    a time, and its goal-free Transformer-XL feature of the current frame (the planner's view).
+
+    With head conditioning (the paper's) the goal enters after that feature, so one backbone
+    pass per step serves both the planner's observation and the guided action.
+    """
+
+    def __init__(self, steve, goals: torch.Tensor) -> None:
+        if steve.model.config.conditioning != "head":
+            raise ValueError(
+                "PPO-Steve reads C-Steve-1's goal-free feature, which needs head conditioning "
+                f"(the paper's); this checkpoint uses {steve.model.config.conditioning!r}"
+            )
+        if goals.ndim != 2 or goals.shape[1] != steve.goal_dim:
+            raise ValueError(
+                f"goals must be (num_captions, {steve.goal_dim}), got {tuple(goals.shape)}"
+            )
+        self.steve, self.goals = steve, goals.to(steve.device)
+        self.hidden: torch.Tensor | None = None
+        self._state = None
+
+    @property
+    def feature_dim(self) -> int:
+        return self.steve.model.backbone.config.d_model
+
+    def reset(self, n: int) -> None:
+        """Empty memory for ``n`` envs."""
+        self._state = self.steve.model.initial_state(n, self.steve.device)
+
+    @torch.no_grad()
+    def observe(self, frames: np.ndarray, first: np.ndarray) -> torch.Tensor:
+        """Feed the current frames (``first`` marks episode starts); the features (N, d_model)."""
+        frames_t = torch.tensor(np.asarray(frames), device=self.steve.device).unsqueeze(1)
+        first_t = torch.as_tensor(first, device=self.steve.device).unsqueeze(1)
+        hidden, self._state = self.steve.model.backbone.features(frames_t, first_t, self._state)
+        self.hidden = hidden[:, 0]
+        return self.hidden
+
+    @torch.no_grad()
+    def logits(self, captions: np.ndarray) -> torch.Tensor:
+        """Guided action logits (N, A) at the last observed frames, towards caption ids (N,)."""
+        goal = self.goals[torch.as_tensor(np.asarray(captions), device=self.goals.device)]
+        return self.steve.model.guided_head(
+            self.hidden.unsqueeze(1), goal.unsqueeze(1), self.steve.cfg_scale
+        )[:, 0].float()
+
+
+def planner_observation(hidden: torch.Tensor, last_choice: np.ndarray, num_captions: int):
+    """The planner's input: the executor's feature and a one-hot of the caption chosen last
+    (zeros where ``last_choice`` is -1: nothing chosen yet this episode)."""
+    one_hot = torch.zeros(len(last_choice), num_captions)
+    chosen = last_choice >= 0
+    one_hot[np.flatnonzero(chosen), last_choice[chosen]] = 1.0
+    return torch.cat([hidden.float().cpu(), one_hot], dim=1)
+
+
 class PlannerEnv:
     """PPO-Steve's high level: an action is one of the caption ids, C-Steve-1 (frozen, with
     classifier-free guidance) follows that caption for ``option_steps`` env steps.
@@ -122,21 +179,11 @@ class PlannerEnv:
         option_steps: int,
         seed: int,
     ) -> None:
-        if steve.model.config.conditioning != "head":
-            raise ValueError(
-                "PPO-Steve reads C-Steve-1's goal-free feature, which needs head conditioning "
-                f"(the paper's); this checkpoint uses {steve.model.config.conditioning!r}"
-            )
-        if goals.ndim != 2 or goals.shape[1] != steve.goal_dim:
-            raise ValueError(
-                f"goals must be (num_captions, {steve.goal_dim}), got {tuple(goals.shape)}"
-            )
-        self.tasks, self.steve, self.goals = tasks, steve, goals.to(steve.device)
+        self.executor = CaptionExecutor(steve, goals)
+        self.tasks = tasks
         self.num_envs, self.option_steps = tasks.num_envs, option_steps
         self.num_actions = len(goals)
         self._generator = torch.Generator().manual_seed(seed)
-        self._state = None
-        self._hidden: torch.Tensor | None = None
         self._last_choice = np.full(self.num_envs, -1)
 
     @property
@@ -146,41 +193,27 @@ class PlannerEnv:
 
     @property
     def obs_dim(self) -> int:
-        return self.steve.model.backbone.config.d_model + self.num_actions
-
-    @torch.no_grad()
-    def _feature(self, frames: np.ndarray, first: np.ndarray) -> torch.Tensor:
-        frames_t = torch.tensor(np.asarray(frames), device=self.steve.device).unsqueeze(1)
-        first_t = torch.as_tensor(first, device=self.steve.device).unsqueeze(1)
-        hidden, self._state = self.steve.model.backbone.features(frames_t, first_t, self._state)
-        return hidden[:, 0]
+        return self.executor.feature_dim + self.num_actions
 
     def _observation(self, first: np.ndarray) -> torch.Tensor:
         self._last_choice[first] = -1
-        one_hot = torch.zeros(self.num_envs, self.num_actions)
-        chosen = self._last_choice >= 0
-        one_hot[np.flatnonzero(chosen), self._last_choice[chosen]] = 1.0
-        return torch.cat([self._hidden.float().cpu(), one_hot], dim=1)
+        return planner_observation(self.executor.hidden, self._last_choice, self.num_actions)
 
     def reset(self) -> Transition:
         t = self.tasks.reset()
-        self._state = self.steve.model.initial_state(self.num_envs, self.steve.device)
-        self._hidden = self._feature(t.obs, t.first)
+        self.executor.reset(self.num_envs)
+        self.executor.observe(t.obs, t.first)
         return Transition(self._observation(t.first), t.reward, t.done, t.first, 0, [])
 
     @torch.no_grad()
     def step(self, captions: np.ndarray) -> Transition:
         captions = np.asarray(captions)
-        goal = self.goals[torch.as_tensor(captions, device=self.goals.device)]
         reward = np.zeros(self.num_envs, np.float32)
         waiting = np.zeros(self.num_envs, bool)
         finished: list[EpisodeStats] = []
         env_steps, began, env_seconds = 0, time.perf_counter(), 0.0
         for _ in range(self.option_steps):
-            logits = self.steve.model.guided_head(
-                self._hidden.unsqueeze(1), goal.unsqueeze(1), self.steve.cfg_scale
-            )[:, 0]
-            probs = torch.softmax(logits.float(), -1).cpu()
+            probs = torch.softmax(self.executor.logits(captions), -1).cpu()
             actions = torch.multinomial(probs, 1, generator=self._generator)[:, 0].numpy()
             actions[waiting] = 0  # noop until the option ends
             tick = time.perf_counter()
@@ -190,7 +223,7 @@ class PlannerEnv:
             waiting |= t.done
             finished += t.finished
             env_steps += t.env_steps
-            self._hidden = self._feature(t.obs, t.first)
+            self.executor.observe(t.obs, t.first)
         self._last_choice = np.where(waiting, -1, captions)
         return Transition(
             self._observation(waiting), reward, waiting.copy(), waiting.copy(), env_steps, finished,

@@ -68,3 +68,39 @@ def test_lora_weights_on_a_changed_base_model_are_refused(tmp_path):
         load_checkpoint_agent(run, num_envs=2)
     with pytest.raises(ValueError, match="trained on other weights"):
         train_rl(config.replace(total_env_steps=16), run, resume=True, progress=False)
+
+
+def test_ppo_steve_plays_its_planner_every_option_and_restarts_it_with_an_episode():
+    from tests.zoo.rl.test_envs import _steve
+    from zoo.agents.rl_agent import PlannerAgent
+    from zoo.rl.agents import planner_network
+    from zoo.rl.envs import CaptionExecutor
+
+    steve = _steve()
+    goals = torch.randn(5, 8, generator=torch.Generator().manual_seed(1))
+    seen = []
+    original = steve.model.guided_head
+    steve.model.guided_head = lambda h, goal, scale: seen.append(goal[:, 0].clone()) or original(
+        h, goal, scale)
+    executor = CaptionExecutor(steve, goals)
+    planner = planner_network(executor.feature_dim + 5, 16, 5)
+    calls = []
+    planner_step = planner.step
+    planner.step = lambda x, first, state: calls.append((len(x), first.tolist(), x[:, 16:])) or (
+        planner_step(x, first, state))
+    agent = PlannerAgent(planner, executor, option_steps=3, num_envs=2)
+    agent.reset(np.array([1, 2]))
+    choices = []
+    for t in range(7):
+        if t == 4:
+            agent.reset(np.array([9, 9]), mask=np.array([False, True]))  # env 1: new episode
+        agent.act(_step(2, seed=t))
+        choices.append(agent.choice.copy())
+    # both envs decide at steps 0 and 3, env 1 again at its restart (step 4), env 0 at step 6
+    assert [(n, first) for n, first, _ in calls] == [
+        (2, [True, True]), (2, [False, False]), (1, [True]), (1, [False]),
+    ]
+    assert calls[0][2].sum() == 0 and calls[2][2].sum() == 0  # nothing chosen yet this episode
+    assert calls[1][2][0, choices[0][0]] == 1  # the one-hot carries the caption chosen last
+    for t, goal in enumerate(seen):  # C-Steve-1 follows the caption in force at every step
+        torch.testing.assert_close(goal, goals[torch.as_tensor(choices[t])])
