@@ -3,12 +3,13 @@
 A run directory holds ``config.yaml``, ``metrics.csv`` (one row per update; its success window
 is ``zoo.rl.window.SeedOrderWindow``'s, not "the last 100 that ended"), ``episodes.csv`` (one
 row per ended episode: the update it ended in, its seed index, success, sub-tasks, length),
-optional W&B files, and ``checkpoints/update_*.pt`` with the trainable parameters, the optimizer, the
-update and env-step counts, the episode counter and the sampling generator: ``--resume``
-continues at the same env step with the same optimizer state (``total_env_steps`` may grow,
-to extend a run; every other setting must match). Episodes in flight at the
-checkpoint are dropped (not counted), as are metrics and episode rows logged after it; the resumed run
-starts fresh episodes with the next episode seeds and a fresh 100-episode success window.
+optional W&B files, and ``checkpoints/update_*.pt`` with the trainable parameters, the
+optimizer, the update and env-step counts, the episode counter, the sampling generator and the
+sha256 of the frozen model under the trained parameters: ``--resume`` continues at the same env
+step with the same optimizer state (``total_env_steps`` may grow, to extend a run; every other
+setting must match). Episodes in flight at the checkpoint are dropped (not counted), as are
+metrics and episode rows logged after it; the resumed run starts fresh episodes with the next
+episode seeds and a fresh 100-episode success window.
 """
 
 from __future__ import annotations
