@@ -47,16 +47,16 @@ def load_rl_agent(path: str | Path, num_envs: int, temperature: float = 1.0, gre
     if not isinstance(saved, dict) or not {"config", "trainable"} <= saved.keys():
         raise ValueError(f"{path} is not a `zoo rl train` checkpoint (no config/trainable)")
     config = RLConfig.from_dict(saved["config"], source=str(path))
-    if config.agent == "ppo_steve":
-        steve, goals = load_executor(config)
-        executor = CaptionExecutor(steve, goals)
-        policy = planner_network(executor.feature_dim + len(goals), config.hidden_size, len(goals))
-    else:
+    base = base_sha256(config)
+    if config.agent != "ppo_steve":
         policy = build_pixel_policy(config)
-    load_trainable(policy, saved, path, base_sha256(config))
-    if config.agent == "ppo_steve":
-        return PlannerAgent(policy, executor, config.option_steps, num_envs, temperature, greedy)
-    return RLAgent(policy, config.agent, num_envs, temperature, greedy)
+        load_trainable(policy, saved, path, base)
+        return RLAgent(policy, config.agent, num_envs, temperature, greedy)
+    executor = CaptionExecutor(*load_executor(config))
+    goals = len(executor.goals)
+    planner = planner_network(executor.feature_dim + goals, config.hidden_size, goals)
+    load_trainable(planner, saved, path, base)
+    return PlannerAgent(planner, executor, config.option_steps, num_envs, temperature, greedy)
 
 
 def _check_temperature(temperature: float) -> None:
@@ -103,7 +103,8 @@ class PlannerAgent:
     start) the planner picks a caption from C-Steve-1's feature and the caption it picked last,
     and C-Steve-1 follows it. Unlike training's ``PlannerEnv``, a new episode starts a new option
     at once (no noop wait for the old option to run out). Both the caption and the action are
-    sampled from each env's seeded stream."""
+    sampled from each env's seeded stream; ``temperature`` scales the action logits only (the
+    caption is drawn as in training)."""
 
     name = "ppo_steve"
     needs_pixels = True
