@@ -36,6 +36,33 @@ class InstructableAgent(Agent, Protocol):
         ...
 
 
+class EpisodeStreams:
+    """Each env's random stream, seeded by its episode seed, and which envs are at their first
+    step: so a sampled episode depends on its seed alone, not on its env slot or batch size."""
+
+    def __init__(self, num_envs: int) -> None:
+        self.first = np.ones(num_envs, dtype=bool)
+        self._rngs = [np.random.default_rng(0) for _ in range(num_envs)]
+
+    def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        """Reseed env i from ``seeds[i]`` and mark its first step where ``mask[i]`` (all if None);
+        return the indices reset."""
+        envs = np.arange(len(self._rngs)) if mask is None else np.flatnonzero(mask)
+        for i in envs:
+            self._rngs[i] = np.random.default_rng(int(seeds[i]))
+            self.first[i] = True
+        return envs
+
+    def uniforms(self, envs: np.ndarray | None = None) -> np.ndarray:
+        """One U[0, 1) draw from each env's stream (``envs`` only, if given)."""
+        rngs = self._rngs if envs is None else [self._rngs[i] for i in envs]
+        return np.array([rng.random() for rng in rngs])
+
+    def stepped(self) -> None:
+        """Every env has played a step: none is at its first any more."""
+        self.first[:] = False
+
+
 class RandomAgent:
     """Uniform random actions; each env's stream depends only on its episode seed."""
 

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from zoo.agents.base import EpisodeStreams
 from zoo.envs.base import Step
 from zoo.export import load_policy_model
 from zoo.models.cvpt import CVPTModel
@@ -103,8 +104,7 @@ class CVPTAgent:
         self.policy = policy
         self.num_envs = num_envs
         self._state = policy.initial_state(num_envs)
-        self._first = np.ones(num_envs, dtype=bool)
-        self._rngs = [np.random.default_rng(0) for _ in range(num_envs)]
+        self._episodes = EpisodeStreams(num_envs)
 
     @classmethod
     def from_checkpoint(
@@ -120,15 +120,14 @@ class CVPTAgent:
         return cls(policy, num_envs)
 
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> None:
-        envs = range(self.num_envs) if mask is None else np.flatnonzero(mask)
-        for i in envs:
-            self._rngs[i] = np.random.default_rng(int(seeds[i]))
-            self._first[i] = True
+        self._episodes.reset(seeds, mask)
 
     def act(self, step: Step) -> np.ndarray:
         if step.frames is None:
             raise ValueError("CVPTAgent plays from pixels: make the env with pixels=True")
-        uniforms = np.array([rng.random() for rng in self._rngs])
-        actions, self._state = self.policy.act(step.frames, self._state, self._first, uniforms)
-        self._first[:] = False
+        episodes = self._episodes
+        actions, self._state = self.policy.act(
+            step.frames, self._state, episodes.first, episodes.uniforms()
+        )
+        episodes.stepped()
         return actions.astype(np.int32)

@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from zoo.agents.cvpt_agent import sample_actions
+from zoo.agents.base import EpisodeStreams
 from zoo.envs.base import Step
 from zoo.rl.envs import CaptionExecutor, planner_observation
 
@@ -78,23 +79,21 @@ class RLAgent:
         self.name, self.num_envs = name, num_envs
         self.temperature, self.greedy = temperature, greedy
         self._state = policy.initial_state(num_envs)
-        self._first = np.ones(num_envs, dtype=bool)
-        self._rngs = [np.random.default_rng(0) for _ in range(num_envs)]
+        self._episodes = EpisodeStreams(num_envs)
 
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> None:
-        for i in range(self.num_envs) if mask is None else np.flatnonzero(mask):
-            self._rngs[i] = np.random.default_rng(int(seeds[i]))
-            self._first[i] = True
+        self._episodes.reset(seeds, mask)
 
     @torch.no_grad()
     def act(self, step: Step) -> np.ndarray:
         if step.frames is None:
             raise ValueError("RLAgent plays from pixels: make the env with pixels=True")
         x = self.policy.preprocess(step.frames)
-        out = self.policy.step(x, torch.as_tensor(self._first), self._state)
-        self._state, self._first[:] = out.state, False
-        uniforms = np.array([rng.random() for rng in self._rngs])
-        actions = sample_actions(out.logits, self.temperature, self.greedy, uniforms)
+        episodes = self._episodes
+        out = self.policy.step(x, torch.as_tensor(episodes.first), self._state)
+        self._state = out.state
+        episodes.stepped()
+        actions = sample_actions(out.logits, self.temperature, self.greedy, episodes.uniforms())
         return actions.astype(np.int32)
 
 
@@ -118,33 +117,30 @@ class PlannerAgent:
         self.num_captions = len(executor.goals)
         executor.reset(num_envs)
         self._planner_state = planner.initial_state(num_envs)
-        self._first = np.ones(num_envs, dtype=bool)
+        self._episodes = EpisodeStreams(num_envs)
         self._clock = np.zeros(num_envs, np.int64)
         self.choice = np.full(num_envs, -1)
-        self._rngs = [np.random.default_rng(0) for _ in range(num_envs)]
 
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> None:
-        for i in range(self.num_envs) if mask is None else np.flatnonzero(mask):
-            self._rngs[i] = np.random.default_rng(int(seeds[i]))
-            self._first[i], self._clock[i], self.choice[i] = True, 0, -1
+        envs = self._episodes.reset(seeds, mask)
+        self._clock[envs], self.choice[envs] = 0, -1
 
     @torch.no_grad()
     def act(self, step: Step) -> np.ndarray:
         if step.frames is None:
             raise ValueError("PlannerAgent plays from pixels: make the env with pixels=True")
-        hidden = self.executor.observe(step.frames, self._first)
+        episodes = self._episodes
+        hidden = self.executor.observe(step.frames, episodes.first)
         due = np.flatnonzero(self._clock % self.option_steps == 0)
         if len(due):
             index = torch.as_tensor(due)
             obs = planner_observation(hidden, self.choice, self.num_captions)[index]
-            out = self.planner.step(obs, torch.as_tensor(self._first[due]),
+            out = self.planner.step(obs, torch.as_tensor(episodes.first[due]),
                                     self.planner.select_state(self._planner_state, index))
             self._planner_state[index] = out.state
-            uniforms = np.array([self._rngs[i].random() for i in due])
-            self.choice[due] = sample_actions(out.logits, 1.0, self.greedy, uniforms)
-        uniforms = np.array([rng.random() for rng in self._rngs])
+            self.choice[due] = sample_actions(out.logits, 1.0, self.greedy, episodes.uniforms(due))
         logits = self.executor.logits(self.choice)
-        actions = sample_actions(logits, self.temperature, self.greedy, uniforms)
+        actions = sample_actions(logits, self.temperature, self.greedy, episodes.uniforms())
         self._clock += 1
-        self._first[:] = False
+        episodes.stepped()
         return actions.astype(np.int32)

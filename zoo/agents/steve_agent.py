@@ -22,6 +22,7 @@ from torch.nn import functional as F
 
 from zoo.agents.cvpt_agent import sample_actions
 from zoo.cclip_demo import load_cclip_checkpoint
+from zoo.agents.base import EpisodeStreams
 from zoo.envs.base import Step
 from zoo.export import load_model
 from zoo.models.cclip import CCLIPModel
@@ -188,19 +189,16 @@ class SteveAgent:
         self.goals = goals
         self.num_envs = num_envs
         self._state = policy.initial_state(num_envs)
-        self._first = np.ones(num_envs, dtype=bool)
+        self._episodes = EpisodeStreams(num_envs)
         self._seeds = np.zeros(num_envs, dtype=np.int64)
-        self._rngs = [np.random.default_rng(0) for _ in range(num_envs)]
         self._goal = torch.zeros(num_envs, policy.goal_dim)
         self.instructions: list[str | None] = [None] * num_envs
 
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> None:
         """New episodes where ``mask``: fresh memory, and the current instruction's goal is
         drawn again from the new episode seed."""
-        for i in range(self.num_envs) if mask is None else np.flatnonzero(mask):
+        for i in self._episodes.reset(seeds, mask):
             self._seeds[i] = int(seeds[i])
-            self._rngs[i] = np.random.default_rng(int(seeds[i]))
-            self._first[i] = True
             self._draw_goal(i)
 
     def instruct(self, instructions: list[str | None], mask: np.ndarray | None = None) -> None:
@@ -229,11 +227,11 @@ class SteveAgent:
     def act(self, step: Step) -> np.ndarray:
         if step.frames is None:
             raise ValueError("SteveAgent plays from pixels: make the env with pixels=True")
-        uniforms = np.array([rng.random() for rng in self._rngs])
+        episodes = self._episodes
         actions, self._state = self.policy.act(
-            step.frames, self._goal, self._state, self._first, uniforms
+            step.frames, self._goal, self._state, episodes.first, episodes.uniforms()
         )
-        self._first[:] = False
+        episodes.stepped()
         return actions.astype(np.int32)
 
 

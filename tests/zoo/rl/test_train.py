@@ -41,8 +41,21 @@ def test_a_run_logs_every_update_and_repeats_from_its_seed(tmp_path):
     assert a.keys() == b.keys()
     assert all(torch.equal(a[k], b[k]) for k in a)
     assert [r["policy_loss"] for r in rows] == [r["policy_loss"] for r in _rows(tmp_path / "b")]
-    episodes = _rows(tmp_path / "a", "episodes.csv")  # one row per ended episode
-    assert len(episodes) == int(rows[-1]["episodes"])
+
+
+def test_episodes_csv_has_one_row_per_ended_episode(tmp_path, monkeypatch):
+    import zoo.rl.envs as rl_envs
+
+    make = rl_envs.make_task_env
+    monkeypatch.setattr(  # 5-step episodes, so the 8 steps of each env end at least one
+        rl_envs, "make_task_env", lambda *a, **k: make(*a, **{**k, "max_steps": 5})
+    )
+    train_rl(TINY, tmp_path, progress=False)
+    rows, episodes = _rows(tmp_path), _rows(tmp_path, "episodes.csv")
+    assert len(episodes) == int(rows[-1]["episodes"]) >= TINY.num_envs
+    assert all(1 <= int(e["length"]) <= 5 for e in episodes)
+    assert len({e["episode"] for e in episodes}) == len(episodes)  # each seed index once
+    assert {int(e["update"]) for e in episodes} <= {1, 2}
 
 
 def test_resume_continues_the_step_count_and_the_optimizer_state(tmp_path):
