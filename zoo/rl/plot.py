@@ -82,9 +82,10 @@ def plot_runs(
         ax.set_xlabel("env steps")
         ax.set_ylabel("success rate (100 episodes, seed order)")
         ax.set_ylim(-0.02, 1.02)
-        ax.legend(fontsize=7, loc="upper left")
+        if groups[task]:  # below the axes: never over a curve or a baseline's label
+            ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18))
     fig.tight_layout()
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out)
+    fig.savefig(out, bbox_inches="tight")
     return table
