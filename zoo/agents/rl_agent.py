@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from zoo.agents.cvpt_agent import sample_actions
 from zoo.agents.base import EpisodeStreams
+from zoo.agents.cvpt_agent import sample_actions
 from zoo.envs.base import Step
 from zoo.rl.envs import CaptionExecutor, planner_observation
 

@@ -20,9 +20,9 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
+from zoo.agents.base import EpisodeStreams
 from zoo.agents.cvpt_agent import sample_actions
 from zoo.cclip_demo import load_cclip_checkpoint
-from zoo.agents.base import EpisodeStreams
 from zoo.envs.base import Step
 from zoo.export import load_model
 from zoo.models.cclip import CCLIPModel
