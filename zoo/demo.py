@@ -13,7 +13,6 @@ from pathlib import Path
 from zoo.argtypes import positive_int
 
 
-
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "demo",
@@ -44,6 +43,10 @@ def run_demo(args: argparse.Namespace) -> int:
         ["data", "info", str(data)],
         ["eval", "--agent", "scripted", "--out", str(args.out / "eval"), "--overwrite", *common],
     ]
+    if args.env == "craftax":
+        print("The first run waits 1-2 min before the bars move: JAX compiles Craftax's step and "
+              "renderer (and builds its texture cache once); later runs reuse the compile cache.",
+              flush=True)
     for argv in steps:
         print("\n$ zoo " + " ".join(argv), flush=True)
         code = main(argv)
