@@ -22,9 +22,15 @@ are booleans (T4's second wood pickaxe, made after the coal, never flips one). A
 achievement A at step t is: A's flag flipping, or A's repeatable trace (``achievement_events``):
 an inventory increment for collect/make, the drink level rising for drink, a sapling spent
 for place_plant, one more table/furnace tile for place_table/furnace, and a ripe plant tile
-turning back into a young plant (both games reset an eaten plant) for eat_plant. Sub-task k
-completes at the first step after sub-task k-1 completed where its event occurs; events
-before that (out of order) are ignored, and at most one sub-task completes per step.
+turning back into a young plant (both games reset an eaten plant) for eat_plant. Both games
+cap items and vitals at 9 and still count the act, so at the cap the trace is what else it
+changed: the mined tile (tree to grass, stone/coal/iron/diamond to path), the materials a tool
+cost, the thirst counter restarting for drink. A sapling collected at the cap leaves nothing
+(the grass stays grass), nor does a tool made when it and its sibling (pickaxe/sword of the
+same materials) are both at the cap.
+
+Sub-task k completes at the first step after sub-task k-1 completed where its event occurs;
+events before that (out of order) are ignored, and at most one sub-task completes per step.
 
 T1 (collect sapling, place plant, eat plant) is peaceful as in the paper: after reset and
 every step all zombies, skeletons, arrows and cows are removed (both games spawn them each
@@ -45,7 +51,9 @@ from zoo.envs.constants import ITEM_NAMES, Achievement, Block, Item
 from zoo.envs.schema import State
 
 VITAL_MAX = 9
+ITEM_MAX = 9  # inventory cap of every item in both games
 DRINK = 2  # column of ``player_vitals``
+THIRST = 2  # column of ``player_counters``
 
 
 @dataclass(frozen=True)
@@ -82,7 +90,7 @@ class TaskSpec:
             raise ValueError(f"task {self.name!r} has no sub-tasks")
         if self.max_steps < 1:
             raise ValueError(f"task {self.name!r}: max_steps must be >= 1, got {self.max_steps}")
-        bad = {k: v for k, v in self.inventory.items() if not 0 <= v <= VITAL_MAX}
+        bad = {k: v for k, v in self.inventory.items() if not 0 <= v <= ITEM_MAX}
         if bad:
             raise ValueError(f"task {self.name!r}: item counts must lie in [0, 9], got {bad}")
 
@@ -178,27 +186,62 @@ _ITEM_EVENTS = {
     Achievement.MAKE_IRON_SWORD: Item.IRON_SWORD,
 }
 _BLOCK_EVENTS = {Achievement.PLACE_TABLE: Block.TABLE, Achievement.PLACE_FURNACE: Block.FURNACE}
+# What collecting leaves on the tile in both games as installed: the trace at the item cap.
+_MINED = {
+    Achievement.COLLECT_WOOD: (Block.TREE, Block.GRASS),
+    Achievement.COLLECT_STONE: (Block.STONE, Block.PATH),
+    Achievement.COLLECT_COAL: (Block.COAL, Block.PATH),
+    Achievement.COLLECT_IRON: (Block.IRON, Block.PATH),
+    Achievement.COLLECT_DIAMOND: (Block.DIAMOND, Block.PATH),
+}
+# Tool pairs and the materials making either spends (item -> amounts allowed): the trace of a
+# tool made at the cap. Iron tools cost stone in Craftax-Classic only.
+_RECIPES: tuple[tuple[tuple[Item, Item], dict[Item, tuple[int, ...]]], ...] = (
+    (
+        (Item.WOOD_PICKAXE, Item.WOOD_SWORD),
+        {Item.WOOD: (1,), Item.STONE: (0,), Item.COAL: (0,), Item.IRON: (0,)},
+    ),
+    (
+        (Item.STONE_PICKAXE, Item.STONE_SWORD),
+        {Item.WOOD: (1,), Item.STONE: (1,), Item.COAL: (0,), Item.IRON: (0,)},
+    ),
+    (
+        (Item.IRON_PICKAXE, Item.IRON_SWORD),
+        {Item.WOOD: (1,), Item.STONE: (0, 1), Item.COAL: (1,), Item.IRON: (1,)},
+    ),
+)
+_MADE = {item: ach for ach, item in _ITEM_EVENTS.items()}
 
 
 def achievement_events(prev: State, cur: State) -> np.ndarray:
     """(N, 22) bool: which achievements happened between two consecutive batched states.
 
     A flag flip always counts; the achievements in the module docstring also count when they
-    happen again. Others (eat cow, defeat mobs, place stone, wake up) count on the flip only.
+    happen again, at the item cap too. Others (eat cow, defeat mobs, place stone, wake up)
+    count on the flip only.
     """
     events = cur["achievements"].astype(bool) & ~prev["achievements"].astype(bool)
-    inv_up = cur["inventory"].astype(np.int32) > prev["inventory"].astype(np.int32)
+    before, after = prev["inventory"].astype(np.int32), cur["inventory"].astype(np.int32)
+    inv_up = after > before
     for ach, item in _ITEM_EVENTS.items():
         events[:, ach] |= inv_up[:, item]
+    for ach, (block, left) in _MINED.items():
+        events[:, ach] |= ((prev["map"] == block) & (cur["map"] == left)).any(axis=(1, 2))
+    spent = before - after
+    for pair, costs in _RECIPES:
+        paid = np.all([np.isin(spent[:, item], amounts) for item, amounts in costs.items()], 0)
+        made_at_cap = paid & ~inv_up[:, list(pair)].any(axis=1)
+        for tool, sibling in (pair, pair[::-1]):
+            only_tool_full = (before[:, tool] >= ITEM_MAX) & (before[:, sibling] < ITEM_MAX)
+            events[:, _MADE[tool]] |= made_at_cap & only_tool_full
+    thirst, was = cur["player_counters"][:, THIRST], prev["player_counters"][:, THIRST]
     events[:, Achievement.COLLECT_DRINK] |= (
         cur["player_vitals"][:, DRINK].astype(np.int32) > prev["player_vitals"][:, DRINK]
-    )
-    events[:, Achievement.PLACE_PLANT] |= (
-        cur["inventory"][:, Item.SAPLING].astype(np.int32) < prev["inventory"][:, Item.SAPLING]
-    )
+    ) | ((thirst > 0) & (thirst < was))  # drinking restarts it at 0 (+1 this step)
+    events[:, Achievement.PLACE_PLANT] |= after[:, Item.SAPLING] < before[:, Item.SAPLING]
     for ach, block in _BLOCK_EVENTS.items():
-        before, after = ((s["map"] == block).sum(axis=(1, 2)) for s in (prev, cur))
-        events[:, ach] |= after > before
+        tiles_before, tiles_after = ((s["map"] == block).sum(axis=(1, 2)) for s in (prev, cur))
+        events[:, ach] |= tiles_after > tiles_before
     eaten = (prev["map"] == Block.RIPE_PLANT) & (cur["map"] == Block.PLANT)
     events[:, Achievement.EAT_PLANT] |= eaten.any(axis=(1, 2))
     return events
