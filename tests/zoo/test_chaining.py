@@ -6,7 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from zoo.agents.chaining import ChainingAgent, check_plannable
+from zoo.agents.chaining import (
+    PLANNED,
+    ChainConfig,
+    ChainingAgent,
+    check_plannable,
+    plan_instruction,
+)
 from zoo.envs.base import Step
 from zoo.envs.constants import Achievement, Block, Item
 from zoo.envs.schema import empty_state
@@ -151,7 +157,35 @@ def test_chain_refuses_what_it_cannot_plan():
 
     with pytest.raises(ValueError, match="does not follow instructions"):
         ChainingAgent(RandomAgent(1), "T4")
-    assert all(check_plannable(t) is None for t in TASKS.values())
+    for t in TASKS.values():
+        check_plannable(t)
+    assert {s.achievement for t in TASKS.values() for s in t.subtasks} <= PLANNED
+
+
+@pytest.mark.parametrize(
+    ("table", "near"),
+    [((13, 10), True), ((7, 10), True), ((14, 10), False), ((6, 10), False),
+     ((10, 14), True), ((10, 6), True), ((10, 15), False), ((13, 14), True)],
+)
+def test_a_table_is_near_only_inside_the_9_by_7_local_view(table, near):
+    state = Script().then(wood=3, tiles=[(table, Block.TABLE)]).states[-1]  # player at (10, 10)
+    told = plan_instruction(TASKS["T3"], 0, state, 0)
+    assert told == ("craft wood pickaxe" if near else "place table on grass")
+
+
+def test_the_view_size_is_configurable():
+    state = Script().then(wood=3, tiles=[((14, 10), Block.TABLE)]).states[-1]
+    wide = ChainConfig(view_rows=4)
+    assert plan_instruction(TASKS["T3"], 0, state, 0, wide) == "craft wood pickaxe"
+
+
+@pytest.mark.parametrize(
+    ("plant", "told"), [((10, 12), "obtain ripe plant"), ((10, 63), "obtain sapling")]
+)
+def test_the_eat_plant_step_sees_only_plants_in_the_local_view(plant, told):
+    """4 columns away the plant is seen; 55 away it is not, so a new one is planted."""
+    state = Script().then(pos=(10, 8), tiles=[(plant, Block.RIPE_PLANT)]).states[-1]
+    assert plan_instruction(TASKS["T1"], 2, state, 0) == told
 
 
 def test_scripted_expert_solves_t4_under_the_chain():

@@ -6,7 +6,8 @@ expert) one caption at a time. Each sub-task expands into the captions that get 
 the current state, e.g. T4 from an empty inventory: obtain wood (until enough for a table and
 both pickaxes), place table on grass, craft wood pickaxe, obtain coal, (obtain wood, place
 table if none is near), craft wood pickaxe, obtain stone. Only what an agent could see is
-used: a table counts as near when it lies within ``table_view`` tiles (the 9x7 local view).
+used: a table is near, and a plant is seen, only inside the local view (9 columns by 7 rows
+around the player in both games; ``ChainConfig.view_cols`` / ``view_rows``).
 """
 
 from __future__ import annotations
@@ -57,16 +58,18 @@ class ChainConfig:
 
     table_wood: int = 2
     """Wood a table takes (both games as installed)."""
-    table_view: int = 4
-    """A table within this many tiles (Chebyshev) of the player counts as near."""
+    view_rows: int = 3
+    """Map rows the agent sees above and below itself (the local view is 7 rows tall)."""
+    view_cols: int = 4
+    """Map columns the agent sees left and right of itself (the local view is 9 wide)."""
 
 
-def _table_near(state: State, i: int, radius: int) -> bool:
+def _local_view(state: State, i: int, config: ChainConfig) -> np.ndarray:
+    """The tiles of env ``i``'s map the agent sees: the planner must not know more than it."""
     row, col = (int(v) for v in state["player_pos"][i])
-    rows = slice(max(0, row - radius), row + radius + 1)
-    cols = slice(max(0, col - radius), col + radius + 1)
-    window = state["map"][i][rows, cols]
-    return bool((window == Block.TABLE).any())
+    rows = slice(max(0, row - config.view_rows), row + config.view_rows + 1)
+    cols = slice(max(0, col - config.view_cols), col + config.view_cols + 1)
+    return state["map"][i][rows, cols]
 
 
 def plan_instruction(
@@ -77,7 +80,8 @@ def plan_instruction(
         return None
     inv = state["inventory"][i].astype(np.int64)
     remaining = [s.achievement for s in task.subtasks[k:]]
-    near = _table_near(state, i, config.table_view)
+    view = _local_view(state, i, config)
+    near = bool((view == Block.TABLE).any())
 
     def craft(tool: Item, prerequisite: bool = False) -> str:
         """Wood for every tool still to come (+ a table if none is near) first, then craft."""
@@ -100,7 +104,7 @@ def plan_instruction(
     if ach == Ach.PLACE_TABLE:
         return "place table on grass" if inv[Item.WOOD] >= config.table_wood else "obtain wood"
     if ach == Ach.EAT_PLANT:
-        grown = (state["map"][i] == Block.PLANT) | (state["map"][i] == Block.RIPE_PLANT)
+        grown = (view == Block.PLANT) | (view == Block.RIPE_PLANT)
         return "obtain ripe plant" if grown.any() else plant()
     if ach in WOOD_TOOLS:
         return craft(WOOD_TOOLS[ach])
