@@ -5,9 +5,10 @@ import lightning as L
 import numpy as np
 import pytest
 import torch
+from torch.nn import functional as F
 
 from datamodules.prior_pairs import PriorPairsDataModule
-from lit_models.prior import CVAEPriorModule
+from lit_models.prior import VALIDATION_SEED, CVAEPriorModule
 from zoo.models.prior import load_prior
 
 DIM = 8
@@ -59,15 +60,27 @@ def test_fit_logs_losses_and_cosines_and_reloads_without_lightning(pairs, tmp_pa
     metrics = fit.callback_metrics
     for stage in ("train", "val"):
         assert {f"{stage}/loss", f"{stage}/recon", f"{stage}/kl"} <= set(metrics)
-    for name in ("cos_mean", "cos_sample", "cos_text", "cos_caption_mean"):
-        assert -1 <= float(metrics[f"val/{name}"]) <= 1
+    # the logged cosines are those lit_models/prior.py defines, over the held-out episodes (one
+    # batch) at the trained weights
+    module.eval()
+    val = data.splits["val"]
+    video, text = val["video"], val["text"]
+    assert val["has_caption_mean"].all()  # every caption has training pairs
+    draws = torch.Generator().manual_seed(VALIDATION_SEED)
+    expected = {
+        "cos_mean": F.cosine_similarity(module.model.sample(text, mean=True), video),
+        "cos_sample": F.cosine_similarity(module.model.sample(text, generator=draws), video),
+        "cos_text": F.cosine_similarity(text, video),
+        "cos_caption_mean": F.cosine_similarity(val["caption_mean"], video),
+    }
+    for name, cosines in expected.items():
+        assert float(metrics[f"val/{name}"]) == pytest.approx(float(cosines.mean()), abs=1e-5)
     # 40 steps on 4 well-separated captions: the decoded goal points at its caption's clips
     assert float(metrics["val/cos_mean"]) > 0.7
 
     (path,) = (tmp_path / "checkpoints").glob("*.ckpt")
     loaded = load_prior(path)
     text = torch.from_numpy(np.load(pairs)["text"][:5])
-    module.eval()
     torch.testing.assert_close(loaded.sample(text, mean=True), module(text))
     torch.testing.assert_close(
         loaded.sample(text, generator=torch.Generator().manual_seed(3)),

@@ -3,7 +3,9 @@
 Every policy has ``preprocess(obs)`` (what the rollout stores per step: frames, or frozen
 features so the update never reruns a frozen encoder), ``initial_state(n)``, ``step`` (one
 step of N envs, no gradient) and ``evaluate`` (a whole stored segment from the state the
-rollout started it with, with gradients), and ``select_state`` (the envs of a minibatch).
+rollout started it with, with gradients), ``select_state`` (the envs of a minibatch) and
+``reference_parameters`` (frozen copies only the KL term reads: not part of the acting policy,
+so ``count_parameters`` leaves them out of its total).
 Re-running the segment from its stored start state gives the rollout's own outputs (the GRU is
 deterministic; the Transformer-XL is segment-exact by design, ``zoo/models/trxl.py``), so the
 first epoch's ratio is exactly 1.
@@ -73,6 +75,10 @@ class RecurrentActorCritic(nn.Module):
     def select_state(self, state: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
         return state[index]
 
+    def reference_parameters(self) -> list[nn.Parameter]:
+        """None: PPO-RNN and PPO-Steve's planner have no KL reference."""
+        return []
+
     def _unroll(
         self, x: torch.Tensor, first: torch.Tensor, h: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -139,6 +145,11 @@ class CVPTRLPolicy(nn.Module):
     def select_state(self, state: tuple[TrXLState, TrXLState], index: torch.Tensor):
         return tuple(_select_trxl(s, index) for s in state)
 
+    def reference_parameters(self) -> list[nn.Parameter]:
+        """The frozen pretrained Transformer-XL and head copies: they give the KL term's
+        reference logits but never choose an action."""
+        return [*self.reference_trxl.parameters(), *self.reference_head.parameters()]
+
     def step(self, x: torch.Tensor, first: torch.Tensor, state) -> StepOut:
         x, first = x.unsqueeze(1), first.unsqueeze(1)
         hidden, own = self.trxl(x, first, state[0])
@@ -155,7 +166,21 @@ class CVPTRLPolicy(nn.Module):
         return self.policy_head(hidden), self.value(hidden).squeeze(-1)
 
 
-def count_parameters(module: nn.Module) -> tuple[int, int]:
-    """(trainable, total) parameter counts."""
-    total = sum(p.numel() for p in module.parameters())
-    return sum(p.numel() for p in module.parameters() if p.requires_grad), total
+class ParameterCounts(NamedTuple):
+    """A policy's sizes; the share PPO trains is ``trainable / acting``."""
+
+    trainable: int
+    acting: int  # the policy that acts (with its value head): trainable and frozen parts
+    reference: int  # frozen copies only the KL term reads (C-VPT-RL), outside ``acting``
+
+
+def count_parameters(policy: RecurrentActorCritic | CVPTRLPolicy) -> ParameterCounts:
+    """Trainable and acting-policy parameter counts, and the KL reference's size apart."""
+    reference = policy.reference_parameters()
+    skip = {id(p) for p in reference}
+    acting = [p for p in policy.parameters() if id(p) not in skip]
+    return ParameterCounts(
+        sum(p.numel() for p in acting if p.requires_grad),
+        sum(p.numel() for p in acting),
+        sum(p.numel() for p in reference),
+    )

@@ -26,6 +26,7 @@ import numpy as np
 import torch
 import yaml
 
+from zoo.checkpoint_io import read_torch_file
 from zoo.rl.agents import build_agent
 from zoo.rl.config import RLConfig
 from zoo.rl.policies import count_parameters
@@ -83,7 +84,8 @@ def train_rl(
             f"{out} already holds checkpoints ({found[-1].name}); pass --resume to continue "
             "that run or choose another --out"
         )
-    saved = torch.load(found[-1], map_location="cpu", weights_only=False) if resume and found else None
+    saved = (read_torch_file(found[-1], expected="a `zoo rl train` checkpoint (update_*.pt)")
+             if resume and found else None)
     if saved is not None:  # a resume may extend the run, nothing else
         diff = sorted(k for k, v in config.to_dict().items()
                       if saved["config"].get(k) != v and k != "total_env_steps")
@@ -108,9 +110,11 @@ def train_rl(
         env_steps, wall, episodes = saved["env_steps"], saved["wall_seconds"], saved["episodes"]
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.yaml").write_text(yaml.safe_dump(config.to_dict(), sort_keys=False))
-    trainable, total = count_parameters(policy)
-    print(f"zoo rl: {config.agent} on {config.task} ({config.env}), {trainable:,} of {total:,} "
-          f"parameters trained ({100 * trainable / total:.1f}%), updates {start}..{config.num_updates}")
+    trainable, total, reference = count_parameters(policy)
+    frozen_copy = f" (plus the frozen KL reference's {reference:,})" if reference else ""
+    print(f"zoo rl: {config.agent} on {config.task} ({config.env}), {trainable:,} of the acting "
+          f"policy's {total:,} parameters trained ({100 * trainable / total:.1f}%){frozen_copy}, "
+          f"updates {start}..{config.num_updates}")
     wandb_run = _start_wandb(config, out, start, trainable) if use_wandb else None
 
     from tqdm import tqdm
@@ -185,7 +189,8 @@ def train_rl(
                 "update_share": update_time / seconds,
                 "wall_seconds": wall,
                 "trainable_parameters": trainable,  # not in metrics.csv: the same every row
-                "total_parameters": total,
+                "total_parameters": total,  # the acting policy's, without the KL reference
+                "reference_parameters": reference,
             }
             episode_writer.writerows(
                 {"update": update + 1, "episode": e.episode, "success": int(e.success),

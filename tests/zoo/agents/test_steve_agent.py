@@ -13,6 +13,7 @@ from zoo.models.cclip import CCLIPConfig, CCLIPModel
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.models.prior import CVAEPrior, PriorConfig
 from zoo.models.steve import SteveConfig, SteveModel
+from zoo.models.trxl import TrXLState
 
 
 @pytest.fixture(scope="module")
@@ -63,14 +64,62 @@ def test_a_goal_depends_on_the_episode_seed_and_the_text_alone(goals: GoalEncode
     np.testing.assert_array_equal(a.act(_step(2)), b.act(_step(2)))
 
 
-def test_no_instruction_is_the_zero_goal_and_actions_are_valid(goals: GoalEncoder) -> None:
+def _recorded_logits(agent: SteveAgent) -> list[torch.Tensor]:
+    """The guided logits of each of ``agent``'s later steps, as its policy computes them."""
+    seen, logits = [], agent.policy.logits
+
+    def record(*args: object, **kwargs: object) -> tuple[torch.Tensor, TrXLState]:
+        out = logits(*args, **kwargs)
+        seen.append(out[0])
+        return out
+
+    agent.policy.logits = record
+    return seen
+
+
+def test_no_instruction_is_the_zero_goal_and_actions_are_sampled_from_the_guided_logits(
+    goals: GoalEncoder,
+) -> None:
     agent = SteveAgent(_policy(), goals, 3)
     agent.reset(np.array([1, 2, 3]))
     agent.instruct(["obtain wood", None, "place table on grass"])
     assert torch.count_nonzero(agent._goal[1]) == 0
     actions = agent.act(_step(3))
     assert actions.shape == (3,) and actions.dtype == np.int32
-    assert ((0 <= actions) & (actions < 17)).all()
+    # the same network's guided logits (scale 1.5) at each episode's first step, sampled with
+    # the first draw of each episode seed's stream
+    model = _policy().model
+    with torch.no_grad():
+        logits, _ = model.guided_logits(
+            torch.tensor(_step(3).frames).unsqueeze(1), torch.ones(3, 1, dtype=torch.bool),
+            agent._goal.unsqueeze(1), model.guidance_state(3), 1.5,
+        )
+    cdf = torch.softmax(logits[:, 0].double(), -1).cumsum(-1).numpy()
+    uniforms = [np.random.default_rng(seed).random() for seed in (1, 2, 3)]
+    expected = [np.searchsorted(c, u * c[-1], side="right") for c, u in zip(cdf, uniforms)]
+    np.testing.assert_array_equal(actions, expected)
+
+
+def test_an_env_reset_mid_batch_acts_as_a_fresh_agent_on_the_same_frames(
+    goals: GoalEncoder,
+) -> None:
+    """A new episode starts with empty Transformer-XL memory, whatever its env saw before."""
+    text = ["obtain wood", "obtain wood"]
+    played = SteveAgent(_policy(), goals, 2)
+    played.reset(np.array([5, 6]))
+    played.instruct(text)
+    for seed in range(3):
+        played.act(_step(2, seed))
+    played.reset(np.array([0, 9]), mask=np.array([False, True]))
+    fresh = SteveAgent(_policy(), goals, 2)
+    fresh.reset(np.array([5, 9]))
+    fresh.instruct(text)
+    seen_played, seen_fresh = _recorded_logits(played), _recorded_logits(fresh)
+    actions_played, actions_fresh = played.act(_step(2, 3)), fresh.act(_step(2, 3))
+    torch.testing.assert_close(seen_played[0][1], seen_fresh[0][1])
+    assert actions_played[1] == actions_fresh[1]
+    # env 0 plays on: its memory of the episode's first three steps still counts
+    assert not torch.allclose(seen_played[0][0], seen_fresh[0][0])
 
 
 def test_guidance_scale_zero_is_the_conditional_policy() -> None:

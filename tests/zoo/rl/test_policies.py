@@ -59,6 +59,25 @@ def test_recurrent_policy_re_evaluates_a_segment_exactly():
     torch.testing.assert_close(sub_logits, logits[idx])
 
 
+def test_the_recurrent_policy_forgets_the_previous_episode_at_its_first_step():
+    torch.manual_seed(0)
+    policy = RecurrentActorCritic(FrameEncoder(144, 4, 16), 16, 16, 17)
+    frames, first = torch.as_tensor(_frames()), _first()
+    stale = torch.randn(N, 16)  # the hidden state an earlier episode left behind
+    fresh = policy.initial_state(N)
+    with torch.no_grad():
+        carried = policy.step(frames[:, 0], first[:, 0], stale)
+        new = policy.step(frames[:, 0], first[:, 0], fresh)
+        torch.testing.assert_close(carried.logits, new.logits)
+        torch.testing.assert_close(carried.value, new.value)
+        torch.testing.assert_close(carried.state, new.state)
+        # env 1 starts a new episode at t=3 of the segment: from there on, what came before
+        # is gone, as if its episode had begun the segment
+        logits, _ = policy.evaluate(frames, first, stale)
+        alone, _ = policy.evaluate(frames[1:, 3:], first[1:, 3:], fresh[1:])
+    torch.testing.assert_close(logits[1, 3:], alone[0])
+
+
 def test_cvpt_rl_starts_as_the_pretrained_policy_and_re_evaluates_exactly():
     cvpt = _cvpt()
     frames = _frames()
@@ -93,5 +112,21 @@ def test_only_lora_and_the_value_head_receive_gradients():
     frozen = [n for n, p in policy.named_parameters() if not p.requires_grad]
     assert any(n.startswith("encoder.") for n in frozen)
     assert any(n.startswith("reference_trxl.") for n in frozen)
-    trained, total = count_parameters(policy)
-    assert 0 < trained < total
+
+
+def _size(*modules: torch.nn.Module) -> int:
+    return sum(p.numel() for m in modules for p in m.parameters())
+
+
+def test_the_trained_share_counts_the_acting_policy_not_the_kl_reference():
+    policy = CVPTRLPolicy(_cvpt(), lora_rank=4, lora_alpha=4)
+    # LoRA r 4 on 5 linears per layer, 2 layers (d 32, key_value and ff.0 32->64, ff.3 64->32):
+    # 4 * (64 + 96 + 64 + 96 + 96) = 1664 per layer; the value head 32 + 1
+    lora, value = 2 * 1664, 33
+    assert _size(policy.value) == value
+    pretrained_trxl, head = _size(policy.reference_trxl), _size(policy.policy_head)
+    assert _size(policy.trxl) == pretrained_trxl + lora
+    acting = _size(policy.encoder) + pretrained_trxl + lora + head + value
+    counts = count_parameters(policy)
+    assert counts == (lora + value, acting, pretrained_trxl + head)
+    assert counts == (3361, 26998, 17733)  # 12.4% of the acting policy, not 7.5% of all

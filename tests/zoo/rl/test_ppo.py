@@ -74,6 +74,20 @@ def test_the_kl_term_is_zero_against_itself_and_positive_otherwise():
                                                rel=1e-5)
 
 
+def test_the_kl_term_is_kl_of_the_policy_from_the_reference_not_the_reverse():
+    """docs/rl.md: KL(pi || pi_ref), the expectation under the policy being trained."""
+    pi = torch.tensor([[0.5, 0.5], [0.2, 0.8]])
+    ref = torch.tensor([[0.9, 0.1], [0.5, 0.5]])
+    # KL(pi || ref) = sum pi log(pi / ref): 0.5 ln(5/9) + 0.5 ln 5 = 0.5108; 0.2 ln 0.4 +
+    # 0.8 ln 1.6 = 0.1927. The reverse would be 0.3681 and 0.2231.
+    forward = [0.5 * math.log(5 / 9) + 0.5 * math.log(5), 0.2 * math.log(0.4) + 0.8 * math.log(1.6)]
+    torch.testing.assert_close(categorical_kl(pi.log(), ref.log()), torch.tensor(forward))
+    args = (torch.zeros(2, dtype=torch.long), torch.zeros(2), torch.zeros(2), torch.zeros(2),
+            torch.zeros(2), torch.zeros(2))
+    loss = ppo_loss(pi.log(), *args, 0.2, 0.5, 0.0, ref_logits=ref.log(), kl_coef=0.1)
+    assert loss.kl_ref.item() == pytest.approx(sum(forward) / 2, rel=1e-5)
+
+
 def test_explained_variance():
     returns = torch.tensor([1.0, 2.0, 3.0])
     assert explained_variance(returns, returns) == pytest.approx(1.0)

@@ -25,7 +25,7 @@ def _rows(run, name: str = "metrics.csv") -> list[dict]:
 
 
 def _trainable(run) -> dict[str, torch.Tensor]:
-    return torch.load(list_checkpoints(run)[-1], weights_only=False)["trainable"]
+    return torch.load(list_checkpoints(run)[-1], weights_only=True)["trainable"]
 
 
 def test_a_run_logs_every_update_and_repeats_from_its_seed(tmp_path):
@@ -33,6 +33,7 @@ def test_a_run_logs_every_update_and_repeats_from_its_seed(tmp_path):
     train_rl(TINY, tmp_path / "b", progress=False)
     assert last["env_steps"] == 16
     assert last["trainable_parameters"] == last["total_parameters"] > 0  # PPO-RNN trains all
+    assert last["reference_parameters"] == 0
     rows = _rows(tmp_path / "a")
     assert [int(r["env_steps"]) for r in rows] == [8, 16]
     assert all(0 <= float(r["env_share"]) <= 1 for r in rows)
@@ -61,7 +62,7 @@ def test_episodes_csv_has_one_row_per_ended_episode(tmp_path, monkeypatch):
 def test_resume_continues_the_step_count_and_the_optimizer_state(tmp_path):
     run = tmp_path / "run"
     train_rl(TINY.replace(total_env_steps=8), run, progress=False)
-    first = torch.load(list_checkpoints(run)[-1], weights_only=False)
+    first = torch.load(list_checkpoints(run)[-1], weights_only=True)
     assert (first["update"], first["env_steps"]) == (1, 8)
     with pytest.raises(FileExistsError, match="--resume"):
         train_rl(TINY, run, progress=False)
@@ -75,7 +76,7 @@ def test_resume_continues_the_step_count_and_the_optimizer_state(tmp_path):
     rows = _rows(run)
     assert [(int(r["update"]), int(r["env_steps"])) for r in rows] == [(1, 8), (2, 16)]
     assert "999" not in [r["episode"] for r in _rows(run, "episodes.csv")]
-    last = torch.load(list_checkpoints(run)[-1], weights_only=False)
+    last = torch.load(list_checkpoints(run)[-1], weights_only=True)
     assert (last["update"], last["env_steps"]) == (2, 16)
     steps_before = [s["step"] for s in first["optimizer"]["state"].values()]
     steps_after = [s["step"] for s in last["optimizer"]["state"].values()]
