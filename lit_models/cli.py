@@ -8,18 +8,22 @@ from __future__ import annotations
 
 import contextlib
 import io
+import logging
 import os
 import shutil
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import lightning as L
 import yaml
+from jsonargparse import Namespace
 from lightning.pytorch.cli import LightningCLI, SaveConfigCallback
 from lightning.pytorch.loggers import WandbLogger
 
 from lit_models.prediction_writer import NpzPredictionWriter
+from zoo.data.storage import is_url
 
 
 class WandbSaveConfigCallback(SaveConfigCallback):
@@ -65,13 +69,19 @@ class ZooCLI(LightningCLI):
     def parse_arguments(self, parser, args) -> None:
         """``zoo`` hands LightningCLI the command line as ``args``; ``sys.argv`` is hidden while
         parsing only (LightningCLI warns when both are set): DDP's launcher starts the other
-        ranks by running ``sys.argv`` again, so it must hold the real command line."""
+        ranks by running ``sys.argv`` again, so it must hold the real command line.
+
+        A run whose local data path does not exist stops here, in one line, before the seed,
+        W&B and the model summary print."""
         saved = sys.argv
         sys.argv = saved[:1]
         try:
             super().parse_arguments(parser, args)
         finally:
             sys.argv = saved
+        subcommand = self.config.get("subcommand")
+        if subcommand:  # a run, not a test building the CLI from a config's placeholders
+            check_data_paths(self.config[subcommand].data)
 
     def before_instantiate_classes(self) -> None:
         config = self.config[self.subcommand] if self.subcommand else self.config
@@ -93,14 +103,68 @@ class ZooCLI(LightningCLI):
             init_args = getattr(logger, "init_args", None)
             if init_args is not None and "save_dir" in init_args:
                 init_args.save_dir = str(run_dir)
+        # validate/test/predict restore each ModelCheckpoint's state from --ckpt_path, and
+        # Lightning warns when its folder is not the one saved there; outside fit they save
+        # nothing, so they keep the folder of the checkpoint they read
+        ckpt_path = config.get("ckpt_path") if self.subcommand != "fit" else None
+        restored = ckpt_path and not is_url(ckpt_path) and Path(ckpt_path).is_file()
+        checkpoints = Path(ckpt_path).parent if restored else run_dir / "checkpoints"
         for callback in config.trainer.callbacks or []:
             init_args = getattr(callback, "init_args", None)
             if callback.class_path.endswith("ModelCheckpoint") and init_args.dirpath is None:
-                init_args.dirpath = str(run_dir / "checkpoints")
+                init_args.dirpath = str(checkpoints)
+
+    def after_instantiate_classes(self) -> None:
+        if self.subcommand:  # W&B warns when the folder it is given does not exist yet
+            Path(self.trainer.default_root_dir).mkdir(parents=True, exist_ok=True)
+        for logger in self.trainer.loggers:
+            if isinstance(logger, WandbLogger) and logger._wandb_init.get("anonymous") is None:
+                # Lightning hands wandb.init anonymous=None whatever the config says, and wandb
+                # warns on any value since anonymous mode was removed (wandb/wandb#10909)
+                logger._wandb_init.pop("anonymous", None)
 
 
 class DataNotFoundError(FileNotFoundError):
     """A run's data is missing (a user error: reported in one line, not as a traceback)."""
+
+
+DATA_PATH_ARGS = ("root", "embeddings")
+"""Datamodule arguments that name data on disk (or at a URL), in every datamodule that has them."""
+
+
+def check_data_paths(data: Namespace) -> None:
+    """Fail on a local data path that does not exist, naming the config field, before W&B
+    starts and the model is built (a URL is only read later, by fsspec)."""
+    init_args = getattr(data, "init_args", None)
+    if init_args is None:
+        return
+    given = [(f"data.init_args.{name}", init_args.get(name)) for name in DATA_PATH_ARGS]
+    given += [
+        (f"data.init_args.sources[{i}].root", source.get("root"))
+        for i, source in enumerate(init_args.get("sources") or [])
+        if isinstance(source, dict)
+    ]
+    for field, path in given:
+        if isinstance(path, str | os.PathLike) and not is_url(path) and not Path(path).exists():
+            raise DataNotFoundError(f"{field}={path}: no such file or folder")
+
+
+def _not_a_tip(record: logging.LogRecord) -> bool:
+    return not record.getMessage().startswith("💡 Tip:")
+
+
+def _silence_dependency_notices() -> None:
+    """Drop two messages every run printed that say nothing about the run: Lightning's
+    advertisement for litlogger/litmodels (printed whenever neither is used), and torch's
+    FutureWarning on ``LeafSpec``, which Lightning's own ``utilities/_pytree.py`` instantiates
+    (Lightning 2.6 with a newer torch); nothing in this repository uses LeafSpec."""
+    logging.getLogger("lightning.pytorch.utilities.rank_zero").addFilter(_not_a_tip)
+    warnings.filterwarnings(
+        "ignore",
+        message=r"`isinstance\(treespec, LeafSpec\)` is deprecated",
+        category=FutureWarning,
+        module=r"lightning\.pytorch\.utilities\._pytree",
+    )
 
 
 def _remove_failed_run_dirs(run_dirs: set[Path]) -> None:
@@ -116,9 +180,10 @@ def run_lightning_cli(argv: list[str]) -> LightningCLI:
     """Run ``zoo fit|validate|test|predict ARGS`` (argv starts with the verb); ``predict``
     writes its outputs to ``<run dir>/predictions/*.npz``.
 
-    A missing data folder raises ``DataNotFoundError``; any failure before the first checkpoint
+    A missing data path raises ``DataNotFoundError``; any failure before the first checkpoint
     removes the run's folder.
     """
+    _silence_dependency_notices()
     predicting = bool(argv) and argv[0] == "predict"
     given_before = set(_RUN_DIRS_GIVEN)
     try:
@@ -144,7 +209,9 @@ def run_lightning_cli(argv: list[str]) -> LightningCLI:
                 wandb.finish(exit_code=1)
         _remove_failed_run_dirs(_RUN_DIRS_GIVEN - given_before)
         if isinstance(err, FileNotFoundError) and "manifest.json" in str(err):
-            raise DataNotFoundError(str(err)) from err
+            raise DataNotFoundError(
+                f"{err} (make it with `zoo data generate`, or point data.init_args.root at one)"
+            ) from err
         raise
     for logger in cli.trainer.loggers:
         if isinstance(logger, WandbLogger):  # the next in-process run gets its own W&B run

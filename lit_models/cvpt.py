@@ -13,6 +13,7 @@ from pathlib import Path
 import torch
 
 from lit_models.sequence_bc import SequenceBC
+from zoo.checkpoint_io import CheckpointError
 from zoo.export import load_checkpoint_model, load_exported
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 
@@ -25,11 +26,14 @@ def _network_weights(path: str, config: CVPTConfig) -> dict[str, torch.Tensor]:
             " a run that started from it? Its weights are in --ckpt_path: add"
             " --model.init_args.init_weights=null)"
         )
-    source = load_exported(path) if Path(path).is_dir() else load_checkpoint_model(path)
+    try:
+        source = load_exported(path) if Path(path).is_dir() else load_checkpoint_model(path)
+    except CheckpointError as err:
+        raise CheckpointError(f"model.init_weights: {err}") from None
     if source.config != config:
         theirs, ours = dataclasses.asdict(source.config), dataclasses.asdict(config)
         diff = {k: (theirs[k], ours[k]) for k in ours if theirs.get(k) != ours[k]}
-        raise ValueError(
+        raise CheckpointError(
             f"model.init_weights={path} holds a different C-VPT: (its value, this model's) {diff}"
         )
     return source.state_dict()

@@ -222,6 +222,7 @@ def test_missing_data_is_one_line_and_leaves_no_run_folder(tmp_path: Path, capsy
     from zoo.cli import main
 
     missing = tmp_path / "no-data"
+    missing.mkdir()  # a folder without a manifest (a path that does not exist: test_cli_errors)
     argv = ["fit", f"--config={CONFIG}", f"--trainer.default_root_dir={tmp_path / 'runs'}",
             f"--data.init_args.root={missing}", "--trainer.logger=false",
             "--trainer.enable_progress_bar=false", "--data.init_args.num_workers=0"]
@@ -230,6 +231,28 @@ def test_missing_data_is_one_line_and_leaves_no_run_folder(tmp_path: Path, capsy
     assert err[-1].startswith("zoo fit: ") and str(missing / "manifest.json") in err[-1]
     assert "Traceback" not in "\n".join(err)
     assert not any((tmp_path / "runs").glob("*"))  # the failed run's folder is gone
+
+
+def test_unreadable_init_weights_is_one_line_without_the_unsafe_advice(
+    crafterplay: Path, tmp_path: Path, capsys
+) -> None:
+    """`zoo fit --model.init_args.init_weights GARBAGE`: torch's weights_only=False advice
+    must not reach the user, and no traceback either."""
+    from zoo.cli import main
+
+    garbage = tmp_path / "garbage.ckpt"
+    garbage.write_bytes(b"not a checkpoint at all")
+    argv = ["fit", f"--config={CONFIG}", f"--trainer.default_root_dir={tmp_path / 'runs'}",
+            f"--data.init_args.root={crafterplay}", "--trainer.logger=false",
+            "--trainer.enable_progress_bar=false", "--data.init_args.num_workers=0",
+            f"--model.init_args.init_weights={garbage}"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.strip().splitlines()[-1] == (
+        f"zoo fit: model.init_weights: {garbage}: not a readable checkpoint (not a torch zip "
+        "archive); expected a `zoo fit` checkpoint (.ckpt) or a `zoo export` folder"
+    )
+    assert "Traceback" not in err and "weights_only" not in err
 
 
 def test_fit_from_the_command_line_gives_no_args_warning(
@@ -268,4 +291,4 @@ def test_ddp_on_two_cpu_processes_trains_one_run_to_the_step_count(
     done = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=600, check=False)
     assert done.returncode == 0, done.stderr[-2000:]
     (run,) = [p for p in tmp_path.iterdir() if p.is_dir()]  # one folder for both ranks
-    assert torch.load(run / "checkpoints" / "last.ckpt", weights_only=False)["global_step"] == 3
+    assert torch.load(run / "checkpoints" / "last.ckpt", weights_only=True)["global_step"] == 3

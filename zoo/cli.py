@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import select
 import sys
 
 TRAIN_VERBS = ("fit", "validate", "test", "predict")
@@ -60,15 +62,43 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
+    """Run ``zoo ARGV``; a reader that stopped reading (``zoo captions list | head``) ends it
+    quietly with code 1 instead of a BrokenPipeError traceback, for every command."""
+    try:
+        code = _run(sys.argv[1:] if argv is None else argv)
+        sys.stdout.flush()  # output still buffered meets the closed pipe here
+    except BrokenPipeError:
+        if not _stdout_reader_gone():
+            raise  # another pipe (a DataLoader worker, a socket) broke: a real error
+        # the Python docs' recipe (signal module, "Note on SIGPIPE"): stdout goes to devnull so
+        # the interpreter's flush at exit does not raise again
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+    return code
+
+
+def _stdout_reader_gone() -> bool:
+    """Whether stdout is a pipe whose reading end is closed (poll reports an error on it)."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        return False
+    if not hasattr(select, "poll"):  # Windows: no way to tell, so not assumed
+        return False
+    poller = select.poll()
+    poller.register(fd, select.POLLOUT)
+    return any(events & select.POLLERR for _, events in poller.poll(0))
+
+
+def _run(argv: list[str]) -> int:
     if argv and argv[0] in TRAIN_VERBS:
         from lit_models.cli import DataNotFoundError, run_lightning_cli
+        from zoo.checkpoint_io import CheckpointError
 
         try:
             run_lightning_cli(argv)
-        except DataNotFoundError as err:
-            print(f"zoo {argv[0]}: {err} (make it with `zoo data generate`, or point "
-                  "data.init_args.root at one)", file=sys.stderr)
+        except (DataNotFoundError, CheckpointError) as err:
+            print(f"zoo {argv[0]}: {err}", file=sys.stderr)
             return 2
         return 0
     parser = build_parser()

@@ -21,6 +21,7 @@ import torch
 from safetensors.torch import load_file, save_file
 from torch import nn
 
+from zoo.checkpoint_io import ZOO_CHECKPOINT, CheckpointError, read_torch_file
 from zoo.data.shards import sha256_file
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 
@@ -147,28 +148,27 @@ def kind_of_hparams(hparams: dict[str, Any]) -> str | None:
 
 
 def read_lightning_checkpoint(
-    path: str | Path, kind: str | None = None
+    path: str | Path, kind: str | None = None, expected: str = ZOO_CHECKPOINT
 ) -> tuple[str, dict[str, Any], dict[str, torch.Tensor]]:
-    """(kind, config, network state dict) of a Lightning .ckpt, via ``weights_only`` torch.load.
+    """(kind, config, network state dict) of a Lightning .ckpt, read weights-only.
 
     ``kind`` is what the caller expects; a checkpoint of another model is an error naming both.
+    ``expected`` is what an unreadable file is said to be instead of.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"checkpoint {path} does not exist")
-    checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+    checkpoint = read_torch_file(path, expected)
     missing = [key for key in ("hyper_parameters", "state_dict") if key not in checkpoint]
     if missing:
-        raise ValueError(f"{path}: not a Lightning checkpoint (lacks {missing})")
+        raise CheckpointError(f"{path}: not a Lightning checkpoint (lacks {missing})")
     hparams = dict(checkpoint["hyper_parameters"])
     found = kind_of_hparams(hparams)
     if kind is not None and found not in (None, kind):
-        raise ValueError(
+        raise CheckpointError(
             f"{path} holds a {KINDS[found].title} checkpoint, expected {KINDS[kind].title} ({kind})"
         )
     kind = kind or found
     if kind is None:
-        raise ValueError(
+        raise CheckpointError(
             f"{path}: cannot tell which model its hyper-parameters {sorted(hparams)} belong to; "
             f"expected one of {sorted(KINDS)}"
         )
@@ -210,7 +210,9 @@ def checkpoint_sha256(path: str | Path) -> str:
 def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path, dtype: str = "float32") -> Path:
     """Write the network of any model's Lightning checkpoint as an export folder."""
     # building here makes weights and config that disagree fail now, not at load time
-    return save_exported(_build(*read_lightning_checkpoint(ckpt_path)), out_dir, dtype)
+    parts = read_lightning_checkpoint(ckpt_path, expected="a `zoo fit` checkpoint (.ckpt)")
+    network = _build(*parts)
+    return save_exported(network, out_dir, dtype)
 
 
 def _kind_of_model(model: nn.Module) -> str:
@@ -254,27 +256,44 @@ def verify_export(out_dir: str | Path) -> None:
                 f"(expected {WEIGHTS_FILE}, {CONFIG_FILE} and {CHECKSUM_FILE})"
             )
     listed = {}
-    for line in (out / CHECKSUM_FILE).read_text().splitlines():
+    for number, line in enumerate((out / CHECKSUM_FILE).read_text().splitlines(), 1):
+        if len(line.split()) != 2:
+            raise CheckpointError(
+                f"{out / CHECKSUM_FILE} line {number}: expected '<sha256>  <file>', got {line!r}"
+            )
         expected, name = line.split()
         listed[name] = expected
         actual = sha256_file(out / name)
         if actual != expected:
-            raise ValueError(
+            raise CheckpointError(
                 f"checksum mismatch for {out / name}: sha256.txt says {expected}, file has {actual}"
             )
     unlisted = [name for name in (WEIGHTS_FILE, CONFIG_FILE) if name not in listed]
     if unlisted:
-        raise ValueError(f"{out / CHECKSUM_FILE} has no sum for {unlisted}")
+        raise CheckpointError(f"{out / CHECKSUM_FILE} has no sum for {unlisted}")
+
+
+def read_export_config(out_dir: str | Path) -> dict[str, Any]:
+    """An export folder's config.json; a missing or malformed one is an error naming it."""
+    path = Path(out_dir) / CONFIG_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} missing: {out_dir} is not a `zoo export` folder")
+    try:
+        config = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise CheckpointError(f"{path}: not valid JSON ({err}); expected the config.json "
+                              "`zoo export` writes") from None
+    if not isinstance(config, dict):
+        raise CheckpointError(f"{path}: holds a JSON {type(config).__name__}, expected an object")
+    return config
 
 
 def exported_kind(out_dir: str | Path) -> str:
     """The kind an export folder's config.json names (no "kind": a C-VPT export)."""
-    path = Path(out_dir) / CONFIG_FILE
-    if not path.is_file():
-        raise FileNotFoundError(f"{path} missing: {out_dir} is not a `zoo export` folder")
-    kind = json.loads(path.read_text()).get("kind", "cvpt")
+    kind = read_export_config(out_dir).get("kind", "cvpt")
     if kind not in KINDS:
-        raise ValueError(f"{path}: unknown kind {kind!r}, expected one of {sorted(KINDS)}")
+        path = Path(out_dir) / CONFIG_FILE
+        raise CheckpointError(f"{path}: unknown kind {kind!r}, expected one of {sorted(KINDS)}")
     return kind
 
 
@@ -284,12 +303,11 @@ def load_exported(out_dir: str | Path, kind: str = "cvpt") -> nn.Module:
     verify_export(out)
     found = exported_kind(out)
     if found != kind:
-        raise ValueError(
+        raise CheckpointError(
             f"{out / CONFIG_FILE} says kind {found!r} ({KINDS[found].title}), "
             f"expected {kind!r} ({KINDS[kind].title})"
         )
-    config = {k: v for k, v in json.loads((out / CONFIG_FILE).read_text()).items()
-              if k not in RESERVED_KEYS}
+    config = {k: v for k, v in read_export_config(out).items() if k not in RESERVED_KEYS}
     return _build(kind, config, load_file(out / WEIGHTS_FILE))
 
 

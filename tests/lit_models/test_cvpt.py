@@ -13,6 +13,7 @@ from torch.utils.data import DataLoader
 
 from lit_models.cvpt import CVPT
 from lit_models.schedules import WarmupCosine
+from zoo.checkpoint_io import CheckpointError
 from zoo.export import load_checkpoint_model
 
 SMALL = dict(
@@ -178,3 +179,15 @@ def test_init_weights_starts_a_new_run_from_a_finished_one(tmp_path: Path) -> No
     wider = CVPT(**{**SMALL, "d_model": 64}, init_weights=str(tmp_path / "gone.ckpt"))
     with pytest.raises(ValueError, match=r"different C-VPT.*'d_model': \(32, 64\)"):
         wider.setup("fit")
+
+
+def test_unreadable_init_weights_name_the_option_and_the_file(tmp_path: Path) -> None:
+    """`zoo fit --model.init_args.init_weights EMPTY` must not show torch's weights_only advice."""
+    empty = tmp_path / "empty.ckpt"
+    empty.write_bytes(b"")
+    with pytest.raises(CheckpointError) as err:
+        CVPT(**SMALL, init_weights=str(empty)).setup("fit")
+    assert str(err.value) == (
+        f"model.init_weights: {empty}: not a readable checkpoint (empty file); "
+        "expected a `zoo fit` checkpoint (.ckpt) or a `zoo export` folder"
+    )

@@ -81,9 +81,9 @@ def checkpoint_kind(path: str | Path) -> str:
     """Which trained agent a checkpoint holds, from its layout alone.
 
     A PPO run or checkpoint folder has ``meta.json`` files; a ``zoo export`` folder has
-    ``model.safetensors`` and names its kind in ``config.json`` (C-VPT or C-Steve-1 play; C-CLIP
-    and the prior do not); a Lightning ``.ckpt`` file is a C-Steve-1 run when its
-    hyper-parameters name a backbone, otherwise a C-VPT run; a ``zoo rl train`` run folder
+    ``model.safetensors`` or ``sha256.txt`` and names its kind in ``config.json`` (C-VPT or
+    C-Steve-1 play; C-CLIP and the prior do not); a Lightning ``.ckpt`` file is a C-Steve-1 run
+    when its hyper-parameters name a backbone, otherwise a C-VPT run; a ``zoo rl train`` run folder
     (config.yaml, checkpoints/update_*.pt) or one of its ``update_*.pt`` is an RL agent.
     """
     path = Path(path)
@@ -92,11 +92,12 @@ def checkpoint_kind(path: str | Path) -> str:
     if is_rl_checkpoint(path):
         return "rl"
     if path.is_file() and path.suffix == ".ckpt":
-        from zoo.agents.steve_agent import is_steve_checkpoint, read_checkpoint
+        from zoo.agents.steve_agent import is_steve_checkpoint
+        from zoo.checkpoint_io import read_torch_file
 
-        return "csteve1" if is_steve_checkpoint(read_checkpoint(path)) else "cvpt"
+        return "csteve1" if is_steve_checkpoint(read_torch_file(path)) else "cvpt"
     if path.is_dir():
-        if (path / "model.safetensors").is_file():
+        if (path / "model.safetensors").is_file() or (path / "sha256.txt").is_file():
             from zoo.export import KINDS, exported_kind
 
             kind = exported_kind(path)

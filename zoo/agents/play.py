@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -31,8 +32,14 @@ def caption_frames(frames: np.ndarray, text: str, scale: int = 2) -> np.ndarray:
     return np.concatenate([np.broadcast_to(bar_pixels, (t, *bar_pixels.shape)), frames], axis=1)
 
 
-def play_episode(agent, env, seed: int, instruction: str | None, max_steps: int) -> dict:
-    """Run one episode of ``agent`` in a 1-env ``env``; frames, actions and unlock steps."""
+def play_episode(
+    agent, env, seed: int, instruction: str | None, max_steps: int, progress: bool = False
+) -> dict:
+    """Run one episode of ``agent`` in a 1-env ``env``; frames, actions and unlock steps.
+
+    ``progress`` shows a bar of steps: a C-Steve-1 on CPU takes minutes for 500."""
+    from tqdm import tqdm
+
     seeds = np.array([episode_seed(seed, 0)])
     step = env.reset(seeds)
     agent.reset(seeds)
@@ -40,17 +47,19 @@ def play_episode(agent, env, seed: int, instruction: str | None, max_steps: int)
         agent.instruct([instruction])
     frames, actions, unlocked = [step.frames[0].copy()], [], {}
     before = step.state["achievements"][0].copy()
-    for t in range(max_steps):
-        action = agent.act(step)
-        step = env.step(action)
-        actions.append(int(action[0]))
-        frames.append(step.frames[0].copy())
-        now = step.state["achievements"][0]
-        for index in np.flatnonzero(now & ~before):
-            unlocked[ACHIEVEMENT_NAMES[index]] = t + 1
-        before = now.copy()
-        if step.done[0]:
-            break
+    with tqdm(total=max_steps, unit="step", desc="play", disable=not progress) as bar:
+        for t in range(max_steps):
+            action = agent.act(step)
+            step = env.step(action)
+            bar.update(1)
+            actions.append(int(action[0]))
+            frames.append(step.frames[0].copy())
+            now = step.state["achievements"][0]
+            for index in np.flatnonzero(now & ~before):
+                unlocked[ACHIEVEMENT_NAMES[index]] = t + 1
+            before = now.copy()
+            if step.done[0]:
+                break
     return {
         "frames": np.stack(frames),
         "actions": actions,
@@ -96,19 +105,30 @@ def run_play(args: argparse.Namespace) -> int:
     from zoo.envs import make_env
     from zoo.eval.plots import write_gif
 
-    kind = checkpoint_kind(args.checkpoint)
-    if args.instruction is not None and kind != "csteve1":
-        raise SystemExit(f"--instruction needs a C-Steve-1 checkpoint; {args.checkpoint} is {kind}")
-    if args.instruction is not None and (args.cclip is None or args.prior is None):
-        raise SystemExit(
-            "--instruction needs --cclip and --prior (text -> C-CLIP -> prior -> goal)"
+    try:  # a bad checkpoint is one line naming its file, not a traceback
+        kind = checkpoint_kind(args.checkpoint)
+        if args.instruction is not None and kind != "csteve1":
+            raise ValueError(
+                f"--instruction needs a C-Steve-1 checkpoint; {args.checkpoint} is {kind}"
+            )
+        if args.instruction is not None and (args.cclip is None or args.prior is None):
+            raise ValueError(
+                "--instruction needs --cclip and --prior (text -> C-CLIP -> prior -> goal)"
+            )
+        options = {"cclip": args.cclip, "prior": args.prior, "cfg_scale": args.cfg_scale}
+        agent = load_checkpoint_agent(
+            args.checkpoint, 1, args.temperature, **(options if kind == "csteve1" else {})
         )
-    options = {"cclip": args.cclip, "prior": args.prior, "cfg_scale": args.cfg_scale}
-    agent = load_checkpoint_agent(
-        args.checkpoint, 1, args.temperature, **(options if kind == "csteve1" else {})
-    )
+    except (ValueError, FileNotFoundError) as err:
+        raise SystemExit(f"zoo play: error: {err}") from None
+    if args.instruction is not None:
+        from zoo.agents.steve_agent import instruction_note
+
+        note = instruction_note(agent.goals, args.instruction)
+        if note:
+            print(f"zoo play: note: {note}", file=sys.stderr)
     env = make_env(args.env, 1, pixels=True, max_steps=args.max_steps)
-    result = play_episode(agent, env, args.seed, args.instruction, args.max_steps)
+    result = play_episode(agent, env, args.seed, args.instruction, args.max_steps, progress=True)
     args.out.mkdir(parents=True, exist_ok=True)
     label = args.instruction or "(no instruction)"
     write_gif(caption_frames(result["frames"], label), args.out / "play.gif", scale=1)

@@ -14,6 +14,7 @@ import torch
 
 from zoo.agents.base import EpisodeStreams
 from zoo.agents.cvpt_agent import sample_actions
+from zoo.checkpoint_io import CheckpointError, read_torch_file
 from zoo.envs.base import Step
 from zoo.rl.envs import CaptionExecutor, planner_observation
 
@@ -44,9 +45,9 @@ def load_rl_agent(path: str | Path, num_envs: int, temperature: float = 1.0, gre
     from zoo.rl.train import base_sha256, load_trainable
 
     path = find_rl_checkpoint(path)
-    saved = torch.load(path, map_location="cpu", weights_only=False)
-    if not isinstance(saved, dict) or not {"config", "trainable"} <= saved.keys():
-        raise ValueError(f"{path} is not a `zoo rl train` checkpoint (no config/trainable)")
+    saved = read_torch_file(path, expected="a `zoo rl train` checkpoint (update_*.pt)")
+    if not {"config", "trainable"} <= saved.keys():
+        raise CheckpointError(f"{path} is not a `zoo rl train` checkpoint (no config/trainable)")
     config = RLConfig.from_dict(saved["config"], source=str(path))
     base = base_sha256(config)
     if config.agent != "ppo_steve":

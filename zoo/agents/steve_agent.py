@@ -7,6 +7,8 @@
   6-frame video clip (C-CLIP video tower, what training used).
 - ``StevePolicy``: ``initial_state(n)`` and ``act(frames, goals, state)``, one frame per env per
   call with cached TrXL memory, classifier-free guidance with scale ``cfg_scale`` (paper: 1.5).
+- ``instruction_note``: for an instruction that is not a caption, the caption C-CLIP finds
+  nearest (free text is allowed; the note says what it resembles).
 - ``SteveAgent``: an ``InstructableAgent`` for ``zoo eval``/``zoo play`` (``instruct`` sets an
   env's instruction; it persists across episodes until changed; None plays without a goal).
 """
@@ -29,14 +31,6 @@ from zoo.models.cclip import CCLIPModel
 from zoo.models.prior import CVAEPrior, load_prior
 from zoo.models.steve import SteveModel
 from zoo.models.trxl import TrXLState
-
-
-def read_checkpoint(path: str | Path) -> dict:
-    """A Lightning checkpoint's dict (``weights_only``), with an error naming a bad path."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"checkpoint {path} does not exist")
-    return torch.load(path, map_location="cpu", weights_only=True)
 
 
 def is_steve_checkpoint(checkpoint: dict) -> bool:
@@ -98,6 +92,34 @@ class GoalEncoder:
     def from_clips(self, frames: np.ndarray | torch.Tensor) -> torch.Tensor:
         """(N, D) goals for N clips of 6 frames (N, 6, 144, 144, 3) uint8 (no prior needed)."""
         return self.cclip.encode_video(frames)
+
+    @torch.no_grad()
+    def nearest_caption(self, text: str) -> tuple[str, float]:
+        """The CrafterCaption caption whose C-CLIP text embedding is closest to ``text``'s, and
+        their cosine similarity: what a free-text instruction most resembles in training."""
+        from zoo.captions.vocabulary import load_vocabulary
+
+        captions = load_vocabulary().texts()
+        embeddings = F.normalize(self.cclip.encode_text([text, *captions]), dim=-1)
+        similarity = embeddings[1:] @ embeddings[0]
+        best = int(similarity.argmax())
+        return captions[best], float(similarity[best])
+
+
+def instruction_note(goals: GoalEncoder, text: str) -> str | None:
+    """One line for a user whose instruction is not one of the captions (None if it is one).
+
+    Free text is allowed (C-CLIP reads any text); the nearest caption says which trained
+    behaviour it will most likely get.
+    """
+    from zoo.captions.vocabulary import load_vocabulary
+
+    vocabulary = load_vocabulary()
+    if text in vocabulary:
+        return None
+    caption, similarity = goals.nearest_caption(text)
+    return (f"instruction {text!r} is free text, not one of the {len(vocabulary)} captions; "
+            f"nearest caption {caption!r} (C-CLIP cosine similarity {similarity:.2f})")
 
 
 class StevePolicy:
@@ -239,7 +261,7 @@ __all__ = [
     "GoalEncoder",
     "SteveAgent",
     "StevePolicy",
+    "instruction_note",
     "is_steve_checkpoint",
     "load_steve_checkpoint",
-    "read_checkpoint",
 ]

@@ -122,12 +122,16 @@ def format_shares(shares: dict[str, float]) -> str:
 def _caption(args: argparse.Namespace) -> int:
     from zoo.captions.dataset import caption_dataset
 
-    manifest = caption_dataset(
-        args.src, args.out, seed=args.seed, balance=args.balance,
-        balance_unit=args.balance_unit, per_unit=args.per_unit,
-        heldout_episodes=args.heldout_episodes, val_episodes=args.val_episodes,
-        per_shard=args.per_shard, progress=True,
-    )
+    try:
+        manifest = caption_dataset(
+            args.src, args.out, seed=args.seed, balance=args.balance,
+            balance_unit=args.balance_unit, per_unit=args.per_unit,
+            heldout_episodes=args.heldout_episodes, val_episodes=args.val_episodes,
+            per_shard=args.per_shard, progress=True,
+        )
+    except (FileNotFoundError, ValueError) as err:  # bad --src or options: one line, no traceback
+        print(f"zoo data caption: {err}", file=sys.stderr)
+        return 2
     sizes = {s: m["samples"] for s, m in manifest["splits"].items()}
     how = f"balanced per {args.balance_unit}" if args.balance == "uniform" else "unbalanced"
     print(f"wrote {sizes} clip-caption pairs to {args.out} ({how})")

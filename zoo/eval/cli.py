@@ -129,7 +129,7 @@ def _build_agent(args: argparse.Namespace, num_envs: int):
                 raise UsageError(f"--agent is required (one of {', '.join(AGENT_NAMES)})")
             return load_checkpoint_agent(checkpoint, num_envs, args.temperature, **options)
         return make_agent(args.agent, num_envs, checkpoint, args.temperature, **options)
-    except ValueError as err:
+    except (ValueError, FileNotFoundError) as err:  # a bad checkpoint names its file
         raise UsageError(str(err)) from None
     except ImportError as err:
         who = repr(args.agent) if args.agent else f"of {args.checkpoint}"
@@ -216,6 +216,12 @@ def run_task_eval(args: argparse.Namespace, agent, num_envs: int, now: datetime)
             agent.instruct([args.instruction] * num_envs)
         except ValueError as err:
             raise UsageError(f"--instruction: {err}") from None
+        if getattr(agent, "name", None) == "csteve1":  # reads free text: say what it resembles
+            from zoo.agents.steve_agent import instruction_note
+
+            note = instruction_note(agent.goals, args.instruction)
+            if note:
+                print(f"zoo eval: note: {note}", file=sys.stderr)
     elif args.chain:
         from zoo.agents.chaining import ChainingAgent
 

@@ -156,8 +156,9 @@ def evaluate(
     first_frames(step, np.ones(n, bool))
 
     results: list[EpisodeResult] = []
-    env_steps, started = 0, time.perf_counter()
-    shown = started
+    # the rate is timed from the end of the first step, which compiles Craftax's step (seconds):
+    # counted from the start, a short evaluation showed steps_per_s=0 to its end
+    env_steps, started, shown = 0, None, 0.0
     bar = tqdm(total=episodes, unit="ep", desc=f"eval {env.name}", disable=not progress)
     try:
         while len(results) < episodes:
@@ -187,7 +188,9 @@ def evaluate(
                 agent.reset(seeds, reset_mask)
                 first_frames(step, reset_mask)
             now = time.perf_counter()
-            if now - shown > 1.0:  # long episodes: keep the bar alive between finishes
+            if started is None:
+                env_steps, started, shown = 0, now, now
+            elif len(results) == episodes or now - shown > 1.0:  # each second, and at the end
                 bar.set_postfix(steps_per_s=f"{env_steps / (now - started):.0f}")
                 shown = now
     finally:

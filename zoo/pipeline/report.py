@@ -81,12 +81,11 @@ def _data(records: dict) -> Table:
 
 def _checkpoint_numbers(path: Path) -> tuple[int, str, str, int]:
     """(step, monitor, best score, last step) of a ``zoo fit`` best checkpoint."""
-    import torch
+    from zoo.checkpoint_io import read_torch_file
 
-    best = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
+    best = read_torch_file(path, mmap=True)
     last_path = path.with_name("last.ckpt")
-    last = torch.load(last_path, map_location="cpu", weights_only=True, mmap=True) \
-        if last_path.exists() else best
+    last = read_torch_file(last_path, mmap=True) if last_path.exists() else best
     monitored = [s for s in best["callbacks"].values() if s.get("monitor")]
     monitor, score = ("", "") if not monitored else (
         monitored[0]["monitor"], f"{float(monitored[0]['best_model_score']):.4g}")
