@@ -154,7 +154,6 @@ KNOWN_MUTUAL = {
 }
 KNOWN_CYCLES = {
     "zoo.export -> zoo.models.prior",
-    "zoo.pipeline -> zoo.pipeline.cli -> zoo.pipeline.runner -> zoo.pipeline.stages",
 }
 
 

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 
+import zoo.pipeline.checks as checks
 from zoo.envs import ENV_NAMES
-from zoo.pipeline import checks
 from zoo.pipeline.config import PipelineConfig
 
 Keys = dict[str, Path]  # stage name -> key file of its verified output
