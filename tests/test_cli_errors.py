@@ -124,7 +124,7 @@ def test_eval_rate_is_timed_from_the_end_of_the_first_step(monkeypatch, capsys) 
 
 def test_play_shows_a_bar_of_steps(capsys) -> None:
     from zoo.agents import RandomAgent
-    from zoo.agents.play import play_episode
+    from zoo.eval.play import play_episode
 
     result = play_episode(RandomAgent(1), ShortGame(5), 0, None, 50, progress=True)
     assert len(result["actions"]) == 5

@@ -24,7 +24,7 @@ TOP_LEVEL = (
     ("zoo.experts.cli", "register"),
     ("zoo.export_cli", "register"),
     ("zoo.demo", "register"),
-    ("zoo.agents.play", "register"),
+    ("zoo.eval.play", "register"),
     ("zoo.rl.cli", "register"),
     ("zoo.pipeline", "register"),
 )

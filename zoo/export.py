@@ -22,7 +22,7 @@ from safetensors.torch import load_file, save_file
 from torch import nn
 
 from zoo.checkpoint_io import ZOO_CHECKPOINT, CheckpointError, read_torch_file
-from zoo.data.shards import sha256_file
+from zoo.files import sha256_file
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 
 WEIGHTS_FILE = "model.safetensors"

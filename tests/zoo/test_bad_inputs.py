@@ -17,7 +17,7 @@ from zoo.agents.steve_agent import GoalEncoder, instruction_note
 from zoo.cclip_demo import load_cclip_checkpoint
 from zoo.checkpoint_io import CheckpointError, read_torch_file
 from zoo.cli import main
-from zoo.data.shards import sha256_file
+from zoo.files import sha256_file
 from zoo.export import CHECKSUM_FILE, CONFIG_FILE, WEIGHTS_FILE, load_exported
 
 WEIGHTS = Path(__file__).resolve().parents[2] / "weights"
@@ -85,7 +85,7 @@ def test_a_torch_file_that_is_not_a_dict_is_named(tmp_path) -> None:
 
 
 def test_a_bad_rl_checkpoint_says_what_was_expected(tmp_path) -> None:
-    from zoo.agents.rl_agent import load_rl_agent
+    from zoo.rl.play import load_rl_agent
 
     path = tmp_path / "update_000001.pt"
     path.write_bytes(b"")

@@ -1,12 +1,85 @@
-"""Agents by name, so CLIs and configs can say which one plays."""
+"""Agents by name, so CLIs and configs can say which one plays.
+
+``make_agent`` looks a name up in ``FACTORIES``. The agents of ``zoo rl train`` runs live above
+this package (``zoo/rl/play.py``: they are built from RL policies) and must not be imported
+from here (tests/test_layers.py), so their entry names its module and is imported only when
+such an agent is asked for.
+"""
 
 from __future__ import annotations
 
+import importlib
+from collections.abc import Callable
 from pathlib import Path
 
 from zoo.agents.base import Agent, RandomAgent
 
-AGENT_NAMES = ("random", "scripted", "ppo", "cvpt", "csteve1", "rl")
+Factory = Callable[..., Agent]
+"""``factory(checkpoint, num_envs, temperature, greedy, **options) -> Agent``."""
+
+
+def _random(checkpoint, num_envs: int, temperature: float, greedy: bool, **options) -> Agent:
+    return RandomAgent(num_envs)
+
+
+def _scripted(checkpoint, num_envs: int, temperature: float, greedy: bool,
+              expert_options: dict | None = None, **options) -> Agent:
+    from zoo.experts.scripted import ScriptedExpert
+
+    return ScriptedExpert(num_envs, **(expert_options or {}))
+
+
+def _ppo(checkpoint: str, num_envs: int, temperature: float, greedy: bool, **options) -> Agent:
+    from zoo.experts.ppo import PPOExpert
+
+    return PPOExpert.load(checkpoint, num_envs)
+
+
+def _cvpt(checkpoint: str, num_envs: int, temperature: float, greedy: bool, **options) -> Agent:
+    from zoo.agents.cvpt_agent import CVPTAgent
+
+    return CVPTAgent.from_checkpoint(checkpoint, num_envs, temperature=temperature, greedy=greedy)
+
+
+def _csteve1(checkpoint: str, num_envs: int, temperature: float, greedy: bool,
+             cclip: str | None = None, prior: str | None = None, cfg_scale: float = 1.5,
+             **options) -> Agent:
+    from zoo.agents.steve_agent import GoalEncoder, SteveAgent, StevePolicy
+
+    policy = StevePolicy.load(checkpoint, cfg_scale=cfg_scale, temperature=temperature,
+                              greedy=greedy)
+    goals = GoalEncoder.load(cclip, prior) if cclip is not None else None
+    return SteveAgent(policy, goals, num_envs)
+
+
+def imported(target: str) -> Factory:
+    """The factory ``"module:function"``, imported when first called (not when registered)."""
+    module, _, name = target.partition(":")
+
+    def factory(*args, **kwargs) -> Agent:
+        return getattr(importlib.import_module(module), name)(*args, **kwargs)
+
+    return factory
+
+
+FACTORIES: dict[str, Factory] = {
+    "random": _random,
+    "scripted": _scripted,
+    "ppo": _ppo,
+    "cvpt": _cvpt,
+    "csteve1": _csteve1,
+    "rl": imported("zoo.rl.play:load_rl_agent"),
+}
+CHECKPOINTS = {
+    "ppo": "a PPO expert checkpoint dir",
+    "cvpt": "a C-VPT .ckpt or export dir",
+    "csteve1": "a C-Steve-1 .ckpt or export dir",
+    "rl": "a `zoo rl train` run dir or its checkpoints/update_*.pt",
+}
+"""What ``--checkpoint`` must be for the agents that need one."""
+SAMPLING = ("cvpt", "csteve1", "rl")
+"""Agents whose actions are sampled, so ``temperature`` applies."""
+AGENT_NAMES = tuple(FACTORIES)
 
 
 def make_agent(
@@ -21,60 +94,36 @@ def make_agent(
 ) -> Agent:
     """Build the named agent for ``num_envs`` envs; ``checkpoint`` is required by trained ones.
 
-    ``temperature`` scales a sampling policy's logits (C-VPT, C-Steve-1); 0 plays the most
+    ``temperature`` scales a sampling policy's logits (C-VPT, C-Steve-1, RL); 0 plays the most
     likely action. C-Steve-1 reads text instructions through ``cclip`` (its C-CLIP checkpoint)
     and ``prior`` (the CVAE prior's), and guides with ``cfg_scale`` (paper: 1.5).
     ``expert_options`` overrides the scripted expert's ``ExpertConfig`` fields.
     """
+    if name not in FACTORIES:
+        raise ValueError(f"unknown agent {name!r}; expected one of {AGENT_NAMES}")
     if expert_options and name != "scripted":
         raise ValueError(f"expert options apply to the scripted expert only, not {name!r}")
     if temperature < 0:
         raise ValueError(f"temperature must be >= 0, got {temperature}")
-    if temperature != 1.0 and name not in ("cvpt", "csteve1", "rl"):
+    if temperature != 1.0 and name not in SAMPLING:
         raise ValueError(
-            f"temperature applies to the cvpt, csteve1 and rl agents only, not {name!r}"
+            f"temperature applies to the {', '.join(SAMPLING[:-1])} and {SAMPLING[-1]} agents "
+            f"only, not {name!r}"
         )
-    if name == "random":
-        return RandomAgent(num_envs)
+    if name in CHECKPOINTS and checkpoint is None:
+        raise ValueError(f"agent {name!r} needs --checkpoint PATH ({CHECKPOINTS[name]})")
+    greedy = temperature == 0
+    options = {"cclip": cclip, "prior": prior, "cfg_scale": cfg_scale} if name == "csteve1" else {}
     if name == "scripted":
-        from zoo.experts.scripted import ScriptedExpert
+        options["expert_options"] = expert_options
+    return FACTORIES[name](checkpoint, num_envs, 1.0 if greedy else temperature, greedy, **options)
 
-        return ScriptedExpert(num_envs, **(expert_options or {}))
-    if name in ("ppo", "cvpt", "csteve1", "rl") and checkpoint is None:
-        kind = {
-            "ppo": "a PPO expert checkpoint dir",
-            "cvpt": "a C-VPT .ckpt or export dir",
-            "csteve1": "a C-Steve-1 .ckpt or export dir",
-            "rl": "a `zoo rl train` run dir or its checkpoints/update_*.pt",
-        }[name]
-        raise ValueError(f"agent {name!r} needs --checkpoint PATH ({kind})")
-    if name == "ppo":
-        from zoo.experts.ppo import PPOExpert
 
-        return PPOExpert.load(checkpoint, num_envs)
-    if name == "cvpt":
-        from zoo.agents.cvpt_agent import CVPTAgent
-
-        greedy = temperature == 0
-        return CVPTAgent.from_checkpoint(
-            checkpoint, num_envs, temperature=1.0 if greedy else temperature, greedy=greedy
-        )
-    if name == "csteve1":
-        from zoo.agents.steve_agent import GoalEncoder, SteveAgent, StevePolicy
-
-        greedy = temperature == 0
-        policy = StevePolicy.load(
-            checkpoint, cfg_scale=cfg_scale, temperature=1.0 if greedy else temperature,
-            greedy=greedy,
-        )
-        goals = GoalEncoder.load(cclip, prior) if cclip is not None else None
-        return SteveAgent(policy, goals, num_envs)
-    if name == "rl":
-        from zoo.agents.rl_agent import load_rl_agent
-
-        greedy = temperature == 0
-        return load_rl_agent(checkpoint, num_envs, 1.0 if greedy else temperature, greedy)
-    raise ValueError(f"unknown agent {name!r}; expected one of {AGENT_NAMES}")
+def is_rl_run(path: Path) -> bool:
+    """A ``zoo rl train`` run folder (config.yaml + checkpoints/update_*.pt) or one checkpoint."""
+    if path.is_dir():
+        return (path / "config.yaml").is_file() and any((path / "checkpoints").glob("update_*.pt"))
+    return path.is_file() and path.suffix == ".pt" and path.name.startswith("update_")
 
 
 def checkpoint_kind(path: str | Path) -> str:
@@ -87,9 +136,7 @@ def checkpoint_kind(path: str | Path) -> str:
     (config.yaml, checkpoints/update_*.pt) or one of its ``update_*.pt`` is an RL agent.
     """
     path = Path(path)
-    from zoo.agents.rl_agent import is_rl_checkpoint
-
-    if is_rl_checkpoint(path):
+    if is_rl_run(path):
         return "rl"
     if path.is_file() and path.suffix == ".ckpt":
         from zoo.agents.steve_agent import is_steve_checkpoint

@@ -20,7 +20,6 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import os
 import tarfile
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass
@@ -42,6 +41,7 @@ from zoo.captions.balance import (
 from zoo.captions.rules import CATEGORIES, EpisodeView, RuleParams, all_rules, scan_episode
 from zoo.captions.vocabulary import Caption, Vocabulary, load_vocabulary
 from zoo.data.storage import join, read_bytes
+from zoo.files import atomic_path, atomic_write_text, sha256_file
 
 SPLITS = ("train", "val", "test")  # "val" only when val_episodes > 0
 FORMAT_VERSION = 1
@@ -151,23 +151,13 @@ def _sample_key(episode: int, step: int, caption: int) -> str:
 
 def _write_tar(path: Path, samples: list[tuple[str, dict[str, bytes]]]) -> str:
     """Write samples into a tar with fixed metadata (byte-identical reruns); temp + rename."""
-    tmp = path.with_name(path.name + ".tmp")
-    with tarfile.open(tmp, "w", format=tarfile.USTAR_FORMAT) as tar:
+    with atomic_path(path) as tmp, tarfile.open(tmp, "w", format=tarfile.USTAR_FORMAT) as tar:
         for key, files in samples:
             for ext, data in files.items():
                 info = tarfile.TarInfo(f"{key}.{ext}")
                 info.size, info.mtime, info.mode = len(data), 0, 0o644
                 tar.addfile(info, io.BytesIO(data))
-    os.replace(tmp, path)
-    return _sha256(path)
-
-
-def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+    return sha256_file(path)
 
 
 def _encode_clip(frames: np.ndarray, compressor: zstandard.ZstdCompressor) -> bytes:
@@ -327,9 +317,7 @@ def write_caption_dataset(
         ],
         "splits": split_meta,
     }
-    tmp = out / "manifest.json.tmp"
-    tmp.write_text(json.dumps(manifest, indent=1))
-    os.replace(tmp, out / "manifest.json")
+    atomic_write_text(out / "manifest.json", json.dumps(manifest, indent=1))
     return manifest
 
 
@@ -344,9 +332,7 @@ def _check_plan(path: Path, plan: dict) -> None:
                 "use an empty --out folder"
             )
         return
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(plan, indent=1))
-    os.replace(tmp, path)
+    atomic_write_text(path, json.dumps(plan, indent=1))
 
 
 def _write_shards(
@@ -376,7 +362,7 @@ def _write_shards(
 
     def flush(split: str) -> None:
         path, batch = shard_path(split), buffers[split]
-        sha = _sha256(path) if path.exists() else _write_tar(path, batch)
+        sha = sha256_file(path) if path.exists() else _write_tar(path, batch)
         shards[split].append({"name": path.name, "samples": len(batch), "sha256": sha})
         buffers[split] = []
 

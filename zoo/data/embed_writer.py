@@ -15,7 +15,6 @@ CrafterPlay manifest into the same folder is refused.
 from __future__ import annotations
 
 import json
-import os
 import time
 from pathlib import Path
 
@@ -41,9 +40,10 @@ from zoo.data.embed import (
 )
 from zoo.data.manifest import MANIFEST, load_manifest
 from zoo.data.reader import CorruptShardError, iter_episodes
-from zoo.data.shards import sha256_file, tar_member, write_tar
+from zoo.data.shards import tar_member, write_tar
 from zoo.envs.schema import FRAME_SHAPE
 from zoo.export import checkpoint_sha256
+from zoo.files import atomic_write_text, sha256_file
 from zoo.models.cclip import CCLIPModel
 
 
@@ -182,9 +182,7 @@ def _stats(shards: list[dict], counts: dict[int, np.ndarray], run: dict | None) 
 
 def _save(out: Path, manifest: dict) -> None:
     manifest["shards"] = sorted(manifest["shards"], key=lambda e: e["index"])
-    tmp = out / f"{MANIFEST}.tmp-{os.getpid()}"
-    tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
-    os.replace(tmp, out / MANIFEST)
+    atomic_write_text(out / MANIFEST, json.dumps(manifest, indent=1, sort_keys=True) + "\n")
 
 
 def _check_same_run(out: Path, stored: dict, settings: dict) -> None:

@@ -38,11 +38,11 @@ from zoo.data.shards import (
     ChunkEncoder,
     EpisodeRecorder,
     assemble_shard,
-    sha256_file,
 )
 from zoo.envs.base import Step, episode_seed
 from zoo.envs.constants import ACHIEVEMENT_NAMES
 from zoo.envs.schema import index_state
+from zoo.files import sha256_file
 
 ProgressFn = Callable[[int, int], None]  # (episodes finished, frames recorded) since last call
 

@@ -12,9 +12,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from zoo.data.manifest import MANIFEST, load_manifest
-from zoo.data.shards import FRAMES, RENDER, RESIDUAL, sha256_file
+from zoo.data.shards import FRAMES, RENDER, RESIDUAL
 from zoo.envs.constants import ACHIEVEMENT_NAMES
 from zoo.envs.schema import FRAME_SHAPE
+from zoo.files import sha256_file
 
 RAW_FRAME_BYTES = int(FRAME_SHAPE[0] * FRAME_SHAPE[1] * FRAME_SHAPE[2])
 

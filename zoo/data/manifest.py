@@ -9,11 +9,11 @@ exactly the shards that were finished and verified.
 from __future__ import annotations
 
 import json
-import os
 from importlib import metadata
 from pathlib import Path
 
 from zoo.data.storage import join, read_bytes
+from zoo.files import atomic_write_text
 
 MANIFEST = "manifest.json"
 FORMAT = "crafterplay"
@@ -65,10 +65,8 @@ def load_manifest(root: str | Path) -> dict | None:
 def save_manifest(root: str | Path, manifest: dict) -> None:
     """Write via a temp file and rename, so readers never see half a manifest."""
     path = Path(root) / MANIFEST
-    tmp = path.with_name(f"{MANIFEST}.tmp-{os.getpid()}")
     manifest["shards"] = sorted(manifest["shards"], key=lambda entry: entry["index"])
-    tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
-    os.replace(tmp, path)
+    atomic_write_text(path, json.dumps(manifest, indent=1, sort_keys=True) + "\n")
 
 
 def config_diff(stored: dict, config: dict, here: str = "there", there: str = "now") -> str:

@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import io
 import json
-import os
 from collections import Counter
 from pathlib import Path
 
@@ -33,6 +32,7 @@ from zoo.captions.vocabulary import Vocabulary, load_vocabulary
 from zoo.cclip_demo import load_cclip_checkpoint
 from zoo.data.storage import read_bytes
 from zoo.export import checkpoint_sha256
+from zoo.files import atomic_path, atomic_write_text
 from zoo.models.cclip import CCLIPModel
 
 PAIR_FIELDS = {"video": 2, "text": 2, "caption_id": 1, "variant": 1, "episode": 1, "step": 1}
@@ -174,13 +174,9 @@ def write_prior_pairs(
         },
     }
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as file:  # a file object: numpy would append .npz to a path
+    with atomic_path(out) as tmp, open(tmp, "wb") as file:  # numpy adds .npz to a path
         np.savez(file, **arrays)
-    os.replace(tmp, out)
-    side, side_tmp = sidecar_path(out), out.with_name(f".{out.name}.{os.getpid()}.json.tmp")
-    side_tmp.write_text(json.dumps(info, indent=1) + "\n")
-    os.replace(side_tmp, side)
+    atomic_write_text(sidecar_path(out), json.dumps(info, indent=1) + "\n")
     return info
 
 

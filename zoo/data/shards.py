@@ -25,6 +25,7 @@ from zoo.data.codec import FrameCodec, encode_arrays, encode_frames, encode_json
 from zoo.data.noop import noop_runs
 from zoo.data.rerender import encode_rendered
 from zoo.envs.schema import FRAME_SHAPE, STATE_FIELDS, State
+from zoo.files import atomic_path
 
 SHARD_PATTERN = "crafterplay-{index:06d}.tar"
 FRAMES, STATE, STEPS, META = "frames.zst", "state.zst", "steps.zst", "meta.json"
@@ -51,14 +52,6 @@ def tar_trailer(size: int) -> bytes:
     """End-of-archive blocks, padded to tar's 10 KiB record as tarfile writes it."""
     end = size + 2 * _BLOCK
     return b"\0" * (2 * _BLOCK + (-end % tarfile.RECORDSIZE))
-
-
-def sha256_file(path: str | Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def _spool_chunk(
@@ -220,9 +213,8 @@ class EpisodeRecorder:
 def write_tar(path: Path, blocks: Iterable[bytes]) -> str:
     """Write tar member ``blocks`` and the end-of-archive trailer to ``path`` via a temp name
     (renamed when complete and synced, so a killed writer leaves no half shard); its sha256."""
-    tmp = path.with_name(path.name + f".tmp-{os.getpid()}")
     digest, size = hashlib.sha256(), 0
-    with open(tmp, "wb") as out:
+    with atomic_path(path) as tmp, open(tmp, "wb") as out:
         for block in blocks:
             out.write(block)
             digest.update(block)
@@ -232,7 +224,6 @@ def write_tar(path: Path, blocks: Iterable[bytes]) -> str:
         digest.update(trailer)
         out.flush()
         os.fsync(out.fileno())
-    os.replace(tmp, path)
     return digest.hexdigest()
 
 

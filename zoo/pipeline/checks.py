@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from zoo.data.shards import sha256_file
+from zoo.files import sha256_file
 
 
 class Missing(Exception):

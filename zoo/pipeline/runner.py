@@ -16,7 +16,6 @@ interrupted run of the same command: they finish their own folder in place (they
 from __future__ import annotations
 
 import json
-import os
 import shlex
 import sys
 import time
@@ -26,7 +25,7 @@ from dataclasses import asdict
 from datetime import UTC, datetime
 from pathlib import Path
 
-from zoo.data.shards import sha256_file
+from zoo.files import atomic_write_text, sha256_file
 from zoo.pipeline.checks import Bad, Incomplete, Missing
 from zoo.pipeline.config import PipelineConfig
 from zoo.pipeline.stages import Keys, Stage, plan
@@ -181,9 +180,7 @@ def _previous_records(path: Path) -> dict[str, dict]:
 
 def _write_json(path: Path, doc: dict) -> None:
     """Write via a temp file and rename: a kill never leaves half a record."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(doc, indent=1) + "\n")
-    os.replace(tmp, path)
+    atomic_write_text(path, json.dumps(doc, indent=1) + "\n")
 
 
 def _now() -> str:

@@ -27,6 +27,7 @@ import torch
 import yaml
 
 from zoo.checkpoint_io import read_torch_file
+from zoo.files import atomic_path
 from zoo.rl.agents import build_agent
 from zoo.rl.config import RLConfig
 from zoo.rl.policies import count_parameters
@@ -279,9 +280,8 @@ def _save(out, config, policy, optimizer, generator, counts: dict[str, Any]) -> 
         "config": config.to_dict(), **counts, "trainable": trainable,
         "optimizer": optimizer.state_dict(), "generator": generator.get_state(),
     }
-    tmp = folder / f"update_{update:06d}.pt.tmp"
-    torch.save(payload, tmp)
-    tmp.rename(folder / f"update_{update:06d}.pt")
+    with atomic_path(folder / f"update_{update:06d}.pt") as tmp:
+        torch.save(payload, tmp)
     for old in list_checkpoints(out)[:-KEEP_CHECKPOINTS]:
         old.unlink()
 

@@ -72,7 +72,7 @@ def test_lora_weights_on_a_changed_base_model_are_refused(tmp_path):
 
 def test_ppo_steve_plays_its_planner_every_option_and_restarts_it_with_an_episode():
     from tests.zoo.rl.test_envs import _steve
-    from zoo.agents.rl_agent import PlannerAgent
+    from zoo.rl.play import PlannerAgent
     from zoo.rl.agents import planner_network
     from zoo.rl.envs import CaptionExecutor
 

@@ -30,13 +30,6 @@ def find_rl_checkpoint(path: str | Path) -> Path:
     return path
 
 
-def is_rl_checkpoint(path: str | Path) -> bool:
-    path = Path(path)
-    if path.is_dir():
-        return (path / "config.yaml").is_file() and any((path / "checkpoints").glob("update_*.pt"))
-    return path.is_file() and path.suffix == ".pt" and path.name.startswith("update_")
-
-
 def load_rl_agent(path: str | Path, num_envs: int, temperature: float = 1.0, greedy: bool = False):
     """The agent of an ``update_*.pt`` or a run folder (its newest checkpoint): ``RLAgent`` for
     PPO-RNN and C-VPT-RL, ``PlannerAgent`` for PPO-Steve."""
