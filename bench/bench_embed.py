@@ -1,10 +1,10 @@
-"""`zoo data embed` speed -> bench/results/embed.json.
+"""`zoo goals embed` speed -> bench/results/embed.json.
 
 Measures, in one run on the same episodes and checkpoint:
   * clips/s of the embedding with per-frame sharing (each frame through the image tower once,
     the temporal head on overlapping windows) vs naive ``encode_video`` on every explicit clip,
     their ratio, and the largest difference between the two (float32);
-  * clips/s of the whole `zoo data embed` pipeline (read + decode + captions + embed + write)
+  * clips/s of the whole `zoo goals embed` pipeline (read + decode + captions + embed + write)
     over the first ``--pipeline-shards`` CrafterPlay shards.
 
   nice -n 10 .venv/bin/python bench/bench_embed.py \\
@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from zoo.cclip_demo import load_cclip_checkpoint
-from zoo.data.embed_writer import ClipEmbedder, embed_dataset
+from zoo.goals.embed_writer import ClipEmbedder, embed_dataset
 from zoo.data.reader import iter_episodes, list_shards
 
 RESULTS = Path(__file__).parent / "results" / "embed.json"

@@ -1,4 +1,4 @@
-"""C-CLIP (video, text) embedding pairs for the CVAE prior, from a `zoo data prior-pairs` file.
+"""C-CLIP (video, text) embedding pairs for the CVAE prior, from a `zoo goals prior-pairs` file.
 
 The whole file sits in memory (120K pairs of 512-d float32 embeddings are 0.5 GB; the CPU
 config's 11K of 64-d, 6 MB), so batches are index lookups in the main process, no workers.
@@ -22,7 +22,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset, Sampler
 
 from datamodules.seeded_shuffle import run_seed
-from zoo.data.prior_pairs import read_prior_pairs
+from zoo.goals.prior_pairs import read_prior_pairs
 
 
 class PairsDataset(Dataset):
@@ -83,7 +83,7 @@ class PriorPairsDataModule(L.LightningDataModule):
         seed: int | None = None,
     ) -> None:
         """Args:
-            root: the pairs file (.npz) written by `zoo data prior-pairs`, or its URL.
+            root: the pairs file (.npz) written by `zoo goals prior-pairs`, or its URL.
             batch_size: training pairs per batch.
             eval_batch_size: validation pairs per batch.
             val_fraction: share of the episodes held out for validation (at least one episode).

@@ -2,7 +2,7 @@
 
 The CrafterPlay pipeline (shard order, episode splits, noop filter, packing, seeded shuffles)
 unchanged, with one more per-step input: each chunk is read together with its ``zoo data
-embed`` shard and relabelled (``zoo.data.goals.GoalAttacher``, ``zoo.data.relabel``). Batches
+embed`` shard and relabelled (``zoo.goals.attach.GoalAttacher``, ``zoo.goals.relabel``). Batches
 are {frames, actions, first, episode, step} as for C-VPT plus goal float16 (B, S, D),
 goal_mask bool (B, S) (False on unconditional pieces, whose goal is zeros) and goal_step int64
 (B, S) (the episode step whose clip is the goal).
@@ -17,9 +17,9 @@ import warnings
 from collections.abc import Callable, Iterable, Iterator
 
 from datamodules.crafterplay import CrafterPlayDataModule
-from zoo.data.embed import check_embeddings_match, load_embedding_manifest
-from zoo.data.goals import GOAL_KEYS, GoalAttacher
-from zoo.data.relabel import RelabelMode, RelabelParams
+from zoo.goals.embed import check_embeddings_match, load_embedding_manifest
+from zoo.goals.attach import GOAL_KEYS, GoalAttacher
+from zoo.goals.relabel import RelabelMode, RelabelParams
 from zoo.data.sequences import ShardSources
 
 
@@ -53,7 +53,7 @@ class SteveDataModule(CrafterPlayDataModule):
     ) -> None:
         """Args:
         root: CrafterPlay folder (manifest.json + shards) or its URL (docs/data.md).
-        embeddings: its ``zoo data embed`` folder (C-CLIP goal embeddings + step captions); a
+        embeddings: its ``zoo goals embed`` folder (C-CLIP goal embeddings + step captions); a
             local folder.
         relabel: ``event`` (the paper's event-based packing: the window's first caption
             segment), ``event_any`` (any segment of the window, so an event also labels its
@@ -62,7 +62,7 @@ class SteveDataModule(CrafterPlayDataModule):
         max_gap: most steps a goal lies ahead (paper: 10).
         uncond_prob: share of pieces without a goal, for classifier-free guidance (paper: 0.1).
         partial_embeddings: train on the CrafterPlay shards that ``embeddings`` covers (a
-            ``zoo data embed --shards A:B`` run) instead of refusing an incomplete folder.
+            ``zoo goals embed --shards A:B`` run) instead of refusing an incomplete folder.
         seq_len: steps per sequence (paper: 640).
         batch_size: sequences per batch (paper: 128).
         num_workers: DataLoader workers; each reads different shards.

@@ -6,7 +6,7 @@ C-Steve-1 was trained from), C-Steve-1 given the task's own instruction, and C-S
 follows its prior, not the words). ``sweep`` mode: C-Steve-1 on the paper's four CFG tasks at
 several guidance scales, plotted. ``goals`` mode checks the goal pipeline without playing:
 does the prior's goal for each task instruction land nearest that caption's video embeddings
-(per-caption means over a ``zoo data embed`` folder)? Every cell is a ``zoo eval --task``
+(per-caption means over a ``zoo goals embed`` folder)? Every cell is a ``zoo eval --task``
 report under OUT (episode j seeded from (seed, j), so rows share worlds); the summary is
 OUT/summary_<mode>.md and .json, and a table ends with how many tasks C-Steve-1 wins against
 C-VPT (``compare_success``).
@@ -109,7 +109,7 @@ def goals(args) -> list[dict]:
 
     from zoo.agents.steve_agent import GoalEncoder
     from zoo.captions.vocabulary import load_vocabulary
-    from zoo.data.embed import read_embedding_shard
+    from zoo.goals.embed import read_embedding_shard
     from zoo.eval.goal_check import caption_centroids, nearest_captions, rank_of_caption
 
     texts = load_vocabulary().texts()
@@ -207,7 +207,7 @@ def main() -> None:
     parser.add_argument("--temperature", type=float, default=1.0)
     parser.add_argument("--cfg-scale", type=float, default=1.5)
     parser.add_argument("--cfg-scales", type=float, nargs="+", default=[0, 0.5, 1, 1.5, 2, 3])
-    parser.add_argument("--embeddings", type=Path, help="zoo data embed folder (goals mode)")
+    parser.add_argument("--embeddings", type=Path, help="zoo goals embed folder (goals mode)")
     parser.add_argument("--max-shards", type=int, default=12, help="goals mode: shards read")
     parser.add_argument("--min-count", type=int, default=50,
                         help="goals mode: captions with fewer steps have no centroid")

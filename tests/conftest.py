@@ -70,11 +70,11 @@ def steve_cclip(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def steve_embeddings(steve_play: Path, steve_cclip: Path, tmp_path_factory) -> Path:
-    """`zoo data embed` of steve_play with steve_cclip."""
+    """`zoo goals embed` of steve_play with steve_cclip."""
     from zoo.cli import main
 
     out = tmp_path_factory.mktemp("embed")
-    argv = ["data", "embed", "--checkpoint", str(steve_cclip), "--src", str(steve_play), "--out",
+    argv = ["goals", "embed", "--checkpoint", str(steve_cclip), "--src", str(steve_play), "--out",
             str(out), "--no-progress"]
     assert main(argv) == 0
     return out

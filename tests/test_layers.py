@@ -140,7 +140,6 @@ KNOWN_UPWARD = {
 }
 KNOWN_MUTUAL = {
     "zoo.captions <-> zoo.cclip_demo",
-    "zoo.captions <-> zoo.data",
     "zoo.export <-> zoo.models",
 }
 KNOWN_CYCLES = {

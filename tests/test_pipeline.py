@@ -230,8 +230,8 @@ def test_tiny_pipeline_runs_skips_and_remakes(tmp_path, capsys):
     assert main(argv) == 0
     printed = capsys.readouterr().out
     for command in ("$ zoo data generate --expert scripted", "$ zoo data caption", "$ zoo fit",
-                    "$ zoo eval --checkpoint", "$ zoo test", "$ zoo data embed",
-                    "$ zoo data prior-pairs", "$ zoo eval --task collect_sapling"):
+                    "$ zoo eval --checkpoint", "$ zoo test", "$ zoo goals embed",
+                    "$ zoo goals prior-pairs", "$ zoo eval --task collect_sapling"):
         assert command in printed, command
     doc = json.loads((out / "pipeline.json").read_text())
     assert doc["ok"] and {r["status"] for r in doc["stages"]} == {"ran"}

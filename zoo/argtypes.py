@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 
 def _int(text: str, lowest: int, what: str) -> int:
@@ -23,3 +24,33 @@ def positive_int(text: str) -> int:
 def non_negative_int(text: str) -> int:
     """An integer >= 0 (seeds)."""
     return _int(text, 0, "an integer >= 0")
+
+
+def existing_dir(text: str) -> Path:
+    """A folder that exists (a dataset to read)."""
+    path = Path(text)
+    if not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is not a folder")
+    return path
+
+
+def out_dir(text: str) -> Path:
+    """A folder to write, made if missing; an existing file is refused."""
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} exists and is not a folder")
+    return path
+
+
+def shard_range(text: str) -> tuple[int, int]:
+    """``A:B``: CrafterPlay shard indices A..B-1 (either side may be left out)."""
+    start, sep, stop = text.partition(":")
+    try:
+        if not sep:
+            raise ValueError
+        low, high = int(start or 0), int(stop) if stop else 1 << 31
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected A:B shard indices, got {text!r}") from None
+    if low < 0 or high <= low:
+        raise argparse.ArgumentTypeError(f"expected 0 <= A < B in A:B, got {text!r}")
+    return low, high

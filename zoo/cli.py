@@ -17,6 +17,7 @@ TRAIN_VERBS = ("fit", "validate", "test", "predict")
 # (module, function) pairs; each function adds its subcommands to the parser it is given.
 TOP_LEVEL = (
     ("zoo.data.cli", "register"),
+    ("zoo.goals.cli", "register"),
     ("zoo.eval.cli", "register"),
     ("zoo.eval.curves", "register"),
     ("zoo.eval.compare", "register"),

@@ -1,4 +1,4 @@
-"""Prior pairs: `zoo data prior-pairs` on a tiny CrafterCaption folder and a tiny C-CLIP, then the
+"""Prior pairs: `zoo goals prior-pairs` on a tiny CrafterCaption folder and a tiny C-CLIP, then the
 datamodule's episode split and batches."""
 
 import json
@@ -12,7 +12,7 @@ from datamodules.prior_pairs import PriorPairsDataModule, caption_means, split_e
 from zoo.captions.dataset import EpisodeInfo, _encode_sample, _write_tar
 from zoo.captions.vocabulary import load_vocabulary
 from zoo.cli import main
-from zoo.data.prior_pairs import read_prior_pairs, write_prior_pairs
+from zoo.goals.prior_pairs import read_prior_pairs, write_prior_pairs
 from zoo.models.cclip import build_cclip
 
 EMBED_DIM = 64  # the smoke preset's
@@ -104,7 +104,7 @@ def test_capped_paraphrased_pairs_are_seeded_rows_of_the_full_file(
 
 def test_command_line_and_its_errors(caption_root, cclip_checkpoint, tmp_path, capsys):
     out = tmp_path / "cli.npz"
-    args = ["data", "prior-pairs", "--checkpoint", str(cclip_checkpoint[0]), "--src",
+    args = ["goals", "prior-pairs", "--checkpoint", str(cclip_checkpoint[0]), "--src",
             str(caption_root), "--out", str(out), "--no-progress"]
     assert main(args) == 0
     assert "11 pairs from 4 episodes" in capsys.readouterr().out
@@ -120,7 +120,7 @@ def test_reading_a_file_of_another_width_or_layout_is_refused(pairs, tmp_path):
     np.savez(tmp_path / "partial.npz", video=np.zeros((2, 4), np.float32))
     with pytest.raises(ValueError, match=r"partial.npz lacks \['caption_id'"):
         read_prior_pairs(tmp_path / "partial.npz")
-    with pytest.raises(FileNotFoundError, match="zoo data prior-pairs"):
+    with pytest.raises(FileNotFoundError, match="zoo goals prior-pairs"):
         read_prior_pairs(tmp_path / "none.npz")
 
 

@@ -1,4 +1,4 @@
-"""C-Steve-1 data: CrafterPlay sequences with relabelled goals from `zoo data embed` shards."""
+"""C-Steve-1 data: CrafterPlay sequences with relabelled goals from `zoo goals embed` shards."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import torch
 
 from datamodules.steve import SteveDataModule
 from zoo.cli import main
-from zoo.data.embed import load_embedding_manifest, read_embedding_shard
+from zoo.goals.embed import load_embedding_manifest, read_embedding_shard
 
 MAX_GAP = 6
 
@@ -79,14 +79,14 @@ def test_embeddings_of_other_data_are_refused(steve_embeddings: Path, tmp_path: 
     assert main(["data", "generate", "--expert", "random", "--env", "crafter", "--episodes", "1",
                  "--max-steps", "20", "--seed", "3", "--out", str(other), "--no-progress"]) == 0
     module = _module(other, steve_embeddings)
-    with pytest.raises(ValueError, match="rerun zoo data embed|lists"):
+    with pytest.raises(ValueError, match="rerun zoo goals embed|lists"):
         _batches(module)
 
 
 def test_partial_embeddings_train_on_the_embedded_shards_only(
     steve_play: Path, steve_cclip: Path, tmp_path: Path
 ) -> None:
-    assert main(["data", "embed", "--checkpoint", str(steve_cclip), "--src", str(steve_play),
+    assert main(["goals", "embed", "--checkpoint", str(steve_cclip), "--src", str(steve_play),
                  "--out", str(tmp_path), "--shards", "0:1", "--no-progress"]) == 0
     with pytest.raises(ValueError, match="partial_embeddings=true"):
         _batches(_module(steve_play, tmp_path))

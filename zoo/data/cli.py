@@ -10,15 +10,8 @@ import sys
 from pathlib import Path
 
 from zoo.agents import AGENT_NAMES
-from zoo.argtypes import positive_int
+from zoo.argtypes import existing_dir, out_dir, positive_int, shard_range
 from zoo.envs import ENV_NAMES
-
-
-def _out_dir(text: str) -> Path:
-    path = Path(text)
-    if path.exists() and not path.is_dir():
-        raise argparse.ArgumentTypeError(f"{text} exists and is not a folder")
-    return path
 
 
 def _expert_option(text: str) -> tuple[str, object]:
@@ -44,16 +37,9 @@ def _expert_option(text: str) -> tuple[str, object]:
         raise argparse.ArgumentTypeError(f"{key} takes {kind.__name__} values, got {raw!r}") from None
 
 
-def _data_dir(text: str) -> Path:
-    path = Path(text)
-    if not path.is_dir():
-        raise argparse.ArgumentTypeError(f"{text} is not a folder")
-    return path
-
-
 def register(subparsers) -> None:
     data = subparsers.add_parser(
-        "data", help="datasets: generate, dagger, merge, info, caption, embed (C-Steve-1 goals), prior-pairs"
+        "data", help="CrafterPlay datasets: generate, dagger, merge, info; CrafterCaption: caption"
     )
     data.set_defaults(handler=lambda args: data.print_help() or 2)
     data_sub = data.add_subparsers(dest="data_command", metavar="DATA_COMMAND")
@@ -102,18 +88,16 @@ def register(subparsers) -> None:
         "manifest. Refuses folders made with other generation arguments and shard indices that "
         "appear twice; checks every shard's sha256; says which shards no folder has yet.",
     )
-    merge.add_argument("src", nargs="+", type=_data_dir, help="shard-range folders")
-    merge.add_argument("--out", required=True, type=_out_dir, help="the merged dataset folder")
+    merge.add_argument("src", nargs="+", type=existing_dir, help="shard-range folders")
+    merge.add_argument("--out", required=True, type=out_dir, help="the merged dataset folder")
     merge.set_defaults(handler=_merge)
 
     info = data_sub.add_parser("info", help="counts, noop ratios, unlock rates; verify sha256")
-    info.add_argument("dir", type=_data_dir, help="dataset folder")
+    info.add_argument("dir", type=existing_dir, help="dataset folder")
     info.add_argument("--skip-corrupt", action="store_true",
                       help="report shards failing their checksum and summarise the rest (exit 0)")
     info.add_argument("--json", action="store_true", help="print JSON")
     info.set_defaults(handler=_info)
-    _register_prior_pairs(data_sub)
-    _register_embed(data_sub)
 
     if importlib.util.find_spec("zoo.captions.cli") is not None:
         importlib.import_module("zoo.captions.cli").register_data_commands(data_sub)
@@ -123,7 +107,7 @@ def _add_play_args(parser: argparse.ArgumentParser) -> None:
     """Arguments shared by `generate` and `dagger`: how many episodes, where, how."""
     parser.add_argument("--episodes", required=True, type=positive_int)
     parser.add_argument("--seed", required=True, type=int)
-    parser.add_argument("--out", required=True, type=_out_dir, help="dataset folder")
+    parser.add_argument("--out", required=True, type=out_dir, help="dataset folder")
     parser.add_argument("--workers", type=positive_int, default=1, help="shard processes")
     parser.add_argument("--env", choices=ENV_NAMES, default="craftax")
     parser.add_argument("--episodes-per-shard", type=positive_int, default=16)
@@ -136,7 +120,7 @@ def _add_play_args(parser: argparse.ArgumentParser) -> None:
                         help="stored: frames as images; rendered (--env craftax only): residuals "
                         "against re-renders from the stored state, ~1/100 the bytes, "
                         "re-rendered when read (docs/data.md)")
-    parser.add_argument("--shards", type=_shard_range,
+    parser.add_argument("--shards", type=shard_range,
                         help="A:B: write only shards A..B-1 (one task of a job array; join the "
                         "folders with `zoo data merge`)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -257,88 +241,4 @@ def _info(args) -> int:
         for bad in info["bad_shards"]:
             print(f"zoo data info: checksum failed: {bad['file']} ({bad['why']})", file=sys.stderr)
         return 1
-    return 0
-
-
-def _register_prior_pairs(data_sub) -> None:
-    """`zoo data prior-pairs`: C-CLIP (video, text) embedding pairs for the CVAE prior."""
-    pairs = data_sub.add_parser(
-        "prior-pairs",
-        help="embed CrafterCaption clips and captions with C-CLIP: training pairs of the prior",
-        description="Write OUT.npz (video, text float32 embeddings; caption ids, episodes) and "
-        "OUT.json (checkpoint sha256, source, counts). See zoo/data/prior_pairs.py.",
-    )
-    pairs.add_argument("--checkpoint", required=True, help="C-CLIP Lightning checkpoint (.ckpt)")
-    pairs.add_argument("--src", required=True, type=_data_dir, help="CrafterCaption folder")
-    pairs.add_argument("--split", default="test", help="manifest split (test: held-out episodes)")
-    pairs.add_argument("--out", required=True, help="pairs file, ending in .npz")
-    pairs.add_argument("--max-pairs", type=positive_int, help="seeded random subset of the clips")
-    pairs.add_argument("--paraphrases", action="store_true",
-                       help="text of a random caption variant per clip instead of the template")
-    pairs.add_argument("--seed", type=int, default=0, help="seed of --max-pairs, --paraphrases")
-    pairs.add_argument("--batch-size", type=positive_int, default=64, help="clips per C-CLIP pass")
-    pairs.add_argument("--device", default="cpu")
-    pairs.add_argument("--no-progress", action="store_true", help="no progress bar")
-    pairs.set_defaults(handler=_prior_pairs)
-
-
-def _prior_pairs(args) -> int:
-    from zoo.data.prior_pairs import run_prior_pairs
-
-    try:
-        return run_prior_pairs(args)
-    except (FileNotFoundError, ValueError) as err:
-        print(f"zoo data prior-pairs: {err}", file=sys.stderr)
-        return 2
-
-
-def _shard_range(text: str) -> tuple[int, int]:
-    """``A:B``: CrafterPlay shard indices A..B-1 (either side may be left out)."""
-    start, sep, stop = text.partition(":")
-    try:
-        if not sep:
-            raise ValueError
-        low, high = int(start or 0), int(stop) if stop else 1 << 31
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected A:B shard indices, got {text!r}") from None
-    if low < 0 or high <= low:
-        raise argparse.ArgumentTypeError(f"expected 0 <= A < B in A:B, got {text!r}")
-    return low, high
-
-
-def _register_embed(data_sub) -> None:
-    """`zoo data embed`: per-step C-CLIP goal embeddings and captions for C-Steve-1."""
-    embed = data_sub.add_parser(
-        "embed",
-        help="C-CLIP goal embedding and caption of every CrafterPlay step (resumable)",
-        description="Write DIR/embed-NNNNNN.tar (one per CrafterPlay shard) and "
-        "DIR/manifest.json. Rerun the same command after an interruption to finish. "
-        "See zoo/data/embed.py for the format.",
-    )
-    embed.add_argument("--checkpoint", required=True, help="C-CLIP Lightning checkpoint (.ckpt)")
-    embed.add_argument("--src", required=True, type=_data_dir, help="CrafterPlay folder")
-    embed.add_argument("--out", required=True, type=_out_dir, help="embedding folder")
-    embed.add_argument("--batch-size", type=positive_int, default=240,
-                       help="frames per image-tower pass (whole groups of 6)")
-    embed.add_argument("--device", default="cpu")
-    embed.add_argument("--shards", type=_shard_range, help="A:B: only CrafterPlay shards A..B-1")
-    embed.add_argument("--no-progress", action="store_true", help="no progress bar")
-    embed.set_defaults(handler=_embed)
-
-
-def _embed(args) -> int:
-    from zoo.data.embed_writer import embed_dataset
-
-    try:
-        manifest = embed_dataset(args.checkpoint, args.src, args.out, args.batch_size,
-                                 args.device, args.shards, not args.no_progress)
-    except (FileNotFoundError, ValueError, RuntimeError) as err:
-        print(f"zoo data embed: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("interrupted; rerun the same command to finish the embeddings", file=sys.stderr)
-        return 130
-    stats = manifest["stats"]
-    print(f"{args.out}: {len(manifest['shards'])} shards, {stats['episodes']} episodes, "
-          f"{stats['steps']} steps, {stats['captioned_share']:.1%} with a caption")
     return 0

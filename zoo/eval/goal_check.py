@@ -19,7 +19,7 @@ def caption_centroids(
     episodes: Iterable[dict[str, np.ndarray]], num_captions: int
 ) -> tuple[torch.Tensor, np.ndarray]:
     """Unit-norm mean goal per caption (num_captions, D) and its step count, over episodes of
-    ``zoo data embed`` ({"goal": (T, D), "caption": (T,)}; caption -1 = none, skipped)."""
+    ``zoo goals embed`` ({"goal": (T, D), "caption": (T,)}; caption -1 = none, skipped)."""
     sums, counts = None, np.zeros(num_captions, np.int64)
     for episode in episodes:
         ids = episode["caption"].astype(np.int64)

@@ -86,7 +86,7 @@ def craftercaption(out: Path) -> Path:
 
 def embeddings(out: Path, play: Path) -> Path:
     """Goal-embedding manifest present, one intact shard per CrafterPlay shard of ``play``."""
-    from zoo.data.embed import load_embedding_manifest
+    from zoo.goals.embed import load_embedding_manifest
 
     _folder(out)
     if not (out / "manifest.json").exists():
@@ -104,7 +104,7 @@ def embeddings(out: Path, play: Path) -> Path:
 
 def prior_pairs(out: Path) -> Path:
     """``pairs.npz`` reads (every array, so zip CRCs are checked) and its sidecar parses."""
-    from zoo.data.prior_pairs import read_prior_pairs
+    from zoo.goals.prior_pairs import read_prior_pairs
 
     _folder(out)
     pairs = out / "pairs.npz"

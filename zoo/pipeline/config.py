@@ -78,7 +78,7 @@ class PipelineConfig:
     task_episodes: int
     """Episodes of the task evaluation (paper: 20 per task)."""
     device: str
-    """Torch device of ``zoo data embed`` and ``prior-pairs`` (``cpu``, ``cuda``)."""
+    """Torch device of ``zoo goals embed`` and ``prior-pairs`` (``cpu``, ``cuda``)."""
 
     def __post_init__(self) -> None:
         if self.env not in ENV_NAMES:

@@ -155,7 +155,7 @@ def _steve(config: PipelineConfig, data: Path, runs: Path, evals: Path, play: Pa
     def pairs_argv(keys: Keys) -> list[str]:
         most = config.prior_max_pairs
         subset = [] if most is None else ["--max-pairs", str(most)]
-        return ["data", "prior-pairs", "--checkpoint", str(keys["cclip"]), "--src", str(caption),
+        return ["goals", "prior-pairs", "--checkpoint", str(keys["cclip"]), "--src", str(caption),
                 "--split", config.prior_split, *subset, "--paraphrases",
                 "--seed", str(config.seed), "--device", config.device,
                 "--out", str(pairs / "pairs.npz")]
@@ -175,7 +175,7 @@ def _steve(config: PipelineConfig, data: Path, runs: Path, evals: Path, play: Pa
     on = config.steve
     return [
         Stage("embed", ("generate", "cclip"), embed,
-              lambda keys: ["data", "embed", "--checkpoint", str(keys["cclip"]), "--src",
+              lambda keys: ["goals", "embed", "--checkpoint", str(keys["cclip"]), "--src",
                             str(play), "--out", str(embed), "--device", config.device],
               partial(checks.embeddings, play=play), on, resumable=True),
         _fit("csteve1", config.csteve1_config, config.csteve1_args, runs,

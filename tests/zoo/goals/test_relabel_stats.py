@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from zoo.captions.vocabulary import load_vocabulary
-from zoo.data.relabel import NO_CAPTION
-from zoo.data.relabel_stats import mode_stats
+from zoo.goals.relabel import NO_CAPTION
+from zoo.goals.relabel_stats import mode_stats
 
 
 def _episodes() -> dict[int, np.ndarray]:

@@ -1,8 +1,8 @@
 """CrafterPlay chunks with C-Steve-1 goals: relabelled goal steps -> stored C-CLIP embeddings.
 
 A pipeline stage over shard sources (``zoo.data.sequences.ShardSources``): for each CrafterPlay
-shard it loads the matching ``zoo data embed`` shard (same index, same episodes), relabels each
-episode once at its first chunk (``zoo.data.relabel``) and attaches to every chunk, per step,
+shard it loads the matching ``zoo goals embed`` shard (same index, same episodes), relabels each
+episode once at its first chunk (``zoo.goals.relabel``) and attaches to every chunk, per step,
 ``goal`` (float16 (n, D), zeros on unconditional pieces), ``goal_mask`` (bool (n,)) and
 ``goal_step`` (int64 (n,), the episode step whose clip is the goal). Attached before the noop
 filter, so the filter drops a step's goal with the step.
@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from zoo.data.embed import load_embedding_manifest, read_embedding_shard
-from zoo.data.relabel import RelabelParams, episode_rng, relabel_episode
+from zoo.goals.embed import load_embedding_manifest, read_embedding_shard
+from zoo.goals.relabel import RelabelParams, episode_rng, relabel_episode
 from zoo.data.sequences import read_shards
 
 GOAL_KEYS = ("goal", "goal_mask", "goal_step")
@@ -47,7 +47,7 @@ class GoalAttacher:
         if index not in self.files:
             raise FileNotFoundError(
                 f"{self.root}: no goal embeddings for CrafterPlay shard {index} ({source['url']});"
-                f" run `zoo data embed` over the whole dataset (or train on the shards it covers)"
+                f" run `zoo goals embed` over the whole dataset (or train on the shards it covers)"
             )
         return read_embedding_shard(self.root / self.files[index])
 

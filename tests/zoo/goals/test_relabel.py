@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from zoo.data.relabel import NO_CAPTION, RelabelParams, episode_rng, relabel_episode
+from zoo.goals.relabel import NO_CAPTION, RelabelParams, episode_rng, relabel_episode
 
 
 def _pieces(goal_step: np.ndarray) -> list[tuple[int, int]]:

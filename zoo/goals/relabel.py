@@ -28,7 +28,7 @@ where a table already stands, so the goal means "craft now" and a task that star
 table is outside what it was trained on. ``event_any`` keeps goals inside event segments but
 lets the pickaxe also label the run-up that places the table.
 
-Step t's goal clip is o_{g-4..g+1} (``zoo data embed``), which holds the outcome of action g.
+Step t's goal clip is o_{g-4..g+1} (``zoo goals embed``), which holds the outcome of action g.
 """
 
 from __future__ import annotations

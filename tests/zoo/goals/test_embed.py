@@ -1,4 +1,4 @@
-"""`zoo data embed` on a tiny random-agent CrafterPlay set (3 crafter episodes, 3 shards) and a
+"""`zoo goals embed` on a tiny random-agent CrafterPlay set (3 crafter episodes, 3 shards) and a
 tiny C-CLIP: format, equality with encode_video, captions, resume, refusals, damaged shards."""
 
 from __future__ import annotations
@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 import torch
 
-import zoo.data.embed as embed_module
+import zoo.goals.embed as embed_module
 from zoo.captions.rules import EpisodeView, scan_episode
 from zoo.captions.vocabulary import load_vocabulary
 from zoo.cli import main
-from zoo.data.embed import (
+from zoo.goals.embed import (
     CAPTION_PRIORITY,
     EmbeddingMismatchError,
     check_embeddings_match,
@@ -25,7 +25,7 @@ from zoo.data.embed import (
     read_embedding_shard,
     step_captions,
 )
-from zoo.data.embed_writer import ClipEmbedder
+from zoo.goals.embed_writer import ClipEmbedder
 from zoo.data.reader import iter_episodes, list_shards
 from zoo.models.cclip import build_cclip
 
@@ -60,7 +60,7 @@ def checkpoint(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def embedded(play, checkpoint, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("embed")
-    argv = ["data", "embed", "--checkpoint", str(checkpoint), "--src", str(play), "--out",
+    argv = ["goals", "embed", "--checkpoint", str(checkpoint), "--src", str(play), "--out",
             str(out), "--batch-size", "20", "--no-progress"]
     assert main(argv) == 0
     return out
@@ -182,7 +182,7 @@ def test_resume_rewrites_only_the_missing_shard_with_identical_bytes(embedded, p
     kept = {name: (out / name).stat().st_mtime_ns for name in ("embed-000000.tar",
                                                                 "embed-000002.tar")}
     (out / "embed-000002.tar.tmp-999").write_bytes(b"half a shard")  # a killed run's leftover
-    argv = ["data", "embed", "--checkpoint", str(checkpoint), "--src", str(play), "--out",
+    argv = ["goals", "embed", "--checkpoint", str(checkpoint), "--src", str(play), "--out",
             str(out), "--batch-size", "20", "--no-progress"]
     assert main(argv) == 0
     assert {p.name: p.read_bytes() for p in out.glob("embed-*")} == before
@@ -197,7 +197,7 @@ def test_other_checkpoint_or_source_is_refused(embedded, play, checkpoint, tmp_p
     out = tmp_path / "embed"
     shutil.copytree(embedded, out)
     other = _save_checkpoint(tmp_path / "other.ckpt", seed=1)
-    argv = ["data", "embed", "--checkpoint", str(other), "--src", str(play), "--out", str(out),
+    argv = ["goals", "embed", "--checkpoint", str(other), "--src", str(play), "--out", str(out),
             "--no-progress"]
     assert main(argv) == 2
     assert "another checkpoint" in capsys.readouterr().err
@@ -209,13 +209,13 @@ def test_other_checkpoint_or_source_is_refused(embedded, play, checkpoint, tmp_p
     (other_play / "manifest.json").write_text(json.dumps(manifest))
     with pytest.raises(EmbeddingMismatchError, match="sha256"):
         check_embeddings_match(embedded, other_play)
-    argv = ["data", "embed", "--checkpoint", str(checkpoint), "--src", str(other_play), "--out",
+    argv = ["goals", "embed", "--checkpoint", str(checkpoint), "--src", str(other_play), "--out",
             str(out), "--no-progress"]
     assert main(argv) == 2
     assert "another CrafterPlay manifest" in capsys.readouterr().err
 
     partial = tmp_path / "partial"
-    argv = ["data", "embed", "--checkpoint", str(checkpoint), "--src", str(play), "--out",
+    argv = ["goals", "embed", "--checkpoint", str(checkpoint), "--src", str(play), "--out",
             str(partial), "--shards", "1:2", "--no-progress"]
     assert main(argv) == 0
     assert [e["index"] for e in load_embedding_manifest(partial)["shards"]] == [1]
@@ -251,7 +251,7 @@ def test_frame_size_other_than_crafters_is_refused():
 
 @pytest.mark.parametrize("text", ["3", "2:1", "a:b", "-1:2"])
 def test_bad_shard_ranges_are_usage_errors(text, tmp_path, capsys):
-    argv = ["data", "embed", "--checkpoint", "x.ckpt", "--src", str(tmp_path), "--out",
+    argv = ["goals", "embed", "--checkpoint", "x.ckpt", "--src", str(tmp_path), "--out",
             str(tmp_path / "o"), f"--shards={text}"]
     with pytest.raises(SystemExit) as exit_info:
         main(argv)

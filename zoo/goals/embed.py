@@ -3,7 +3,7 @@
 C-Steve-1's hindsight relabelling (paper 4.3) needs, for every step t of every episode, the
 C-CLIP embedding of the clip o_{t-4..t+1} (the goal when a later step is chosen) and the
 CrafterCaption caption fired at t (event segments are runs of one caption). Both are computed
-once by `zoo data embed` (zoo/data/embed_writer.py) so training never runs the video tower.
+once by `zoo goals embed` (zoo/goals/embed_writer.py) so training never runs the video tower.
 
 Layout of an embedding folder: ``embed-{i:06d}.tar`` per CrafterPlay shard i (same episodes,
 same order) and ``manifest.json``. One tar sample per episode, keyed ``{episode:09d}``:
@@ -96,7 +96,7 @@ def load_embedding_manifest(root: str | Path) -> dict:
     """The manifest of an embedding folder; FileNotFoundError/ValueError name the file."""
     path = Path(root) / MANIFEST
     if not path.is_file():
-        raise FileNotFoundError(f"{path} not found: not a goal-embedding folder (zoo data embed)")
+        raise FileNotFoundError(f"{path} not found: not a goal-embedding folder (zoo goals embed)")
     try:
         manifest = json.loads(path.read_text())
     except json.JSONDecodeError as err:
@@ -169,12 +169,12 @@ def check_embeddings_match(
     if made_from != play_sha:
         raise EmbeddingMismatchError(
             f"{Path(embed_root) / MANIFEST} was made from a CrafterPlay manifest with sha256 "
-            f"{made_from}, but {play_path} has sha256 {play_sha}; rerun zoo data embed"
+            f"{made_from}, but {play_path} has sha256 {play_sha}; rerun zoo goals embed"
         )
     have, want = len(embed["shards"]), len(play["shards"])
     if have != want and not (allow_partial and have > 0):
         raise EmbeddingMismatchError(
             f"{Path(embed_root) / MANIFEST} lists {have} shards, {play_path} lists {want}; "
-            "embed the missing shards (zoo data embed without --shards), or train on the "
+            "embed the missing shards (zoo goals embed without --shards), or train on the "
             "embedded ones alone (data.init_args.partial_embeddings=true)"
         )

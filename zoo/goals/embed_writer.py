@@ -1,4 +1,4 @@
-"""`zoo data embed`: C-CLIP goal embeddings and step captions for a CrafterPlay folder.
+"""`zoo goals embed`: C-CLIP goal embeddings and step captions for a CrafterPlay folder.
 
 Each clip o_{t-4..t+1} shares 5 of its 6 frames with its neighbour, so the image tower runs
 once per frame (``encode_frames`` on the episode's frames grouped by 6) and only the small
@@ -24,7 +24,7 @@ import torch.nn.functional as F
 
 from zoo.captions.rules import CATEGORIES, EpisodeView
 from zoo.captions.vocabulary import load_vocabulary
-from zoo.data.embed import (
+from zoo.goals.embed import (
     CAPTION_PRIORITY,
     CLIP,
     FORMAT,

@@ -1,12 +1,12 @@
 """What each relabelling mode teaches: how many steps each caption's goal labels, and from how
-far ahead, over a ``zoo data embed`` folder (its per-step captions; no model, no frames).
+far ahead, over a ``zoo goals embed`` folder (its per-step captions; no model, no frames).
 
 The C-Steve-1 tables in docs/results.md trace a failed task back to the relabelling rule
 ("craft stone pickaxe" never labels a step before the table is placed); this measures that
-directly, for every mode of ``zoo.data.relabel``, so a new rule can be checked before a
+directly, for every mode of ``zoo.goals.relabel``, so a new rule can be checked before a
 23-minute training run:
 
-    python -m zoo.data.relabel_stats --embeddings data/embed_scripted_early2k --shards 24 \\
+    zoo goals relabel-stats --embeddings data/embed_scripted_early2k --shards 24 \\
         --out runs/relabel_stats.json
 
 Printed per mode and caption: steps labelled with that caption's goal (share of all steps),
@@ -16,15 +16,14 @@ event before the goal (the run-up, e.g. placing the table before the pickaxe).
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
 import numpy as np
 
 from zoo.captions.vocabulary import load_vocabulary
-from zoo.data.embed import load_embedding_manifest, read_embedding_shard
-from zoo.data.relabel import NO_CAPTION, RELABEL_MODES, RelabelParams, episode_rng, relabel_episode
+from zoo.goals.embed import load_embedding_manifest, read_embedding_shard
+from zoo.goals.relabel import NO_CAPTION, RELABEL_MODES, RelabelParams, episode_rng, relabel_episode
 
 CAPTIONS = (
     "obtain sapling",
@@ -77,16 +76,13 @@ def mode_stats(episodes: dict[int, np.ndarray], mode: str) -> dict:
     }
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--embeddings", required=True, help="zoo data embed folder")
-    parser.add_argument("--shards", type=int, default=24, help="shards read (from the first)")
-    parser.add_argument("--out", type=Path, help="JSON file for the numbers")
-    args = parser.parse_args()
-    manifest = load_embedding_manifest(args.embeddings)
+def print_relabel_stats(embeddings: str | Path, shards: int, out: Path | None = None) -> dict:
+    """Read the first ``shards`` shards of a ``zoo goals embed`` folder, print each relabelling
+    mode's table, write the numbers to ``out`` (JSON) when given; returns them."""
+    manifest = load_embedding_manifest(embeddings)
     episodes = {}
-    for entry in manifest["shards"][: args.shards]:
-        shard = read_embedding_shard(Path(args.embeddings) / entry["file"])
+    for entry in manifest["shards"][:shards]:
+        shard = read_embedding_shard(Path(embeddings) / entry["file"])
         episodes |= {episode: rec["caption"].astype(np.int64) for episode, rec in shard.items()}
     result = {mode: mode_stats(episodes, mode) for mode in RELABEL_MODES}
     print(f"{len(episodes)} episodes")
@@ -100,10 +96,7 @@ def main() -> None:
                 f"| {text} | {row['steps']} | {100 * row['share']:.2f}% | "
                 f"{row['mean_ahead']:.1f} | {100 * row['run_up_share']:.0f}% |"
             )
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"episodes": len(episodes), **result}, indent=2))
-
-
-if __name__ == "__main__":
-    main()
+    if out:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps({"episodes": len(episodes), **result}, indent=2))
+    return result

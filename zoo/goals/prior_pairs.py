@@ -7,7 +7,7 @@ template caption or, with ``paraphrases``, of one variant (template or paraphras
 uniformly per clip from a seeded generator, so the prior learns every wording an instruction
 may come in. Each distinct text is encoded once.
 
-File layout (``zoo data prior-pairs``): ``OUT.npz`` with ``video`` and ``text`` float32 (N, D),
+File layout (``zoo goals prior-pairs``): ``OUT.npz`` with ``video`` and ``text`` float32 (N, D),
 ``caption_id``, ``variant`` (0: the template, i: its i-th paraphrase, as
 ``Vocabulary.variants`` lists them), ``episode`` and ``step`` int64 (N,); ``OUT.json`` beside it
 records the checkpoint (path, sha256, embedding width), the source folder and split, the options
@@ -187,12 +187,12 @@ def read_prior_pairs(path: str | Path, embed_dim: int | None = None) -> dict[str
         raw = read_bytes(path)
     except FileNotFoundError:
         raise FileNotFoundError(
-            f"{path} does not exist; write it with `zoo data prior-pairs`"
+            f"{path} does not exist; write it with `zoo goals prior-pairs`"
         ) from None
     with np.load(io.BytesIO(raw), allow_pickle=False) as data:
         missing = sorted(set(PAIR_FIELDS) - set(data.files))
         if missing:
-            raise ValueError(f"{path} lacks {missing}; expected a `zoo data prior-pairs` file")
+            raise ValueError(f"{path} lacks {missing}; expected a `zoo goals prior-pairs` file")
         arrays = {name: data[name] for name in PAIR_FIELDS}
     rows = len(arrays["caption_id"])
     for name, ndim in PAIR_FIELDS.items():
@@ -213,7 +213,7 @@ def read_prior_pairs(path: str | Path, embed_dim: int | None = None) -> dict[str
 
 
 def run_prior_pairs(args: argparse.Namespace) -> int:
-    """`zoo data prior-pairs`: write the file and print its counts."""
+    """`zoo goals prior-pairs`: write the file and print its counts."""
     info = write_prior_pairs(
         args.checkpoint, args.src, args.out, split=args.split, max_pairs=args.max_pairs,
         paraphrases=args.paraphrases, seed=args.seed, batch_size=args.batch_size,
