@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from zoo.cclip_demo import load_cclip_checkpoint
+from zoo.captions.query import load_cclip_checkpoint
 from zoo.goals.embed_writer import ClipEmbedder, embed_dataset
 from zoo.data.reader import iter_episodes, list_shards
 

@@ -21,7 +21,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("lit_models", "datamodules"),
     ("zoo.eval", "zoo.rl"),
     ("zoo.agents",),
-    ("zoo.goals", "zoo.data", "zoo.captions", "zoo.cclip_demo"),
+    ("zoo.goals", "zoo.data", "zoo.captions"),
     ("zoo.weights", "zoo.export", "zoo.models", "zoo.experts"),
     ("zoo.envs", "zoo.argtypes", "zoo.strict_config", "zoo.files", "zoo.checkpoint_io"),
 )
@@ -139,7 +139,6 @@ KNOWN_UPWARD = {
     "zoo.data.generate -> zoo.agents",
 }
 KNOWN_MUTUAL = {
-    "zoo.captions <-> zoo.cclip_demo",
     "zoo.export <-> zoo.models",
 }
 KNOWN_CYCLES = {

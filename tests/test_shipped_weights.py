@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from zoo.agents.steve_agent import load_steve_checkpoint
-from zoo.cclip_demo import load_cclip_checkpoint
+from zoo.captions.query import load_cclip_checkpoint
 from zoo.export import CHECKSUM_FILE, exported_kind, load_policy_model, verify_export
 from zoo.models.prior import load_prior
 

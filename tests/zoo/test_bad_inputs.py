@@ -14,7 +14,7 @@ import pytest
 import torch
 
 from zoo.agents.steve_agent import GoalEncoder, instruction_note
-from zoo.cclip_demo import load_cclip_checkpoint
+from zoo.captions.query import load_cclip_checkpoint
 from zoo.checkpoint_io import CheckpointError, read_torch_file
 from zoo.cli import main
 from zoo.files import sha256_file

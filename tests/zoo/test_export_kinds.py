@@ -17,7 +17,7 @@ from torch import nn
 
 from zoo.agents import checkpoint_kind
 from zoo.agents.steve_agent import load_steve_checkpoint
-from zoo.cclip_demo import load_cclip_checkpoint
+from zoo.captions.query import load_cclip_checkpoint
 from zoo.cli import main as zoo_main
 from zoo.files import sha256_file
 from zoo.export import (

@@ -24,7 +24,7 @@ from torch.nn import functional as F
 
 from zoo.agents.base import EpisodeStreams
 from zoo.agents.cvpt_agent import sample_actions
-from zoo.cclip_demo import load_cclip_checkpoint
+from zoo.captions.query import load_cclip_checkpoint
 from zoo.envs.base import Step
 from zoo.export import load_model
 from zoo.models.cclip import CCLIPModel

@@ -142,7 +142,7 @@ def _caption(args: argparse.Namespace) -> int:
 
 
 def _query(args: argparse.Namespace) -> int:
-    from zoo.cclip_demo import run_query
+    from zoo.captions.query import run_query
 
     return run_query(args)
 

@@ -217,7 +217,7 @@ def embed_dataset(
     """
     from tqdm import tqdm
 
-    from zoo.cclip_demo import load_cclip_checkpoint
+    from zoo.captions.query import load_cclip_checkpoint
 
     src, out = Path(src), Path(out)
     play = load_manifest(src)

@@ -29,7 +29,7 @@ from tqdm import tqdm
 
 from zoo.captions.dataset import decode_caption_sample, list_caption_shards
 from zoo.captions.vocabulary import Vocabulary, load_vocabulary
-from zoo.cclip_demo import load_cclip_checkpoint
+from zoo.captions.query import load_cclip_checkpoint
 from zoo.data.storage import read_bytes
 from zoo.export import checkpoint_sha256
 from zoo.files import atomic_path, atomic_write_text

@@ -118,7 +118,7 @@ def test_layout_dtypes_and_manifest(play, embedded, checkpoint, episodes):
 
 
 def test_rows_are_encode_video_of_the_clamped_clips(embedded, checkpoint, episodes):
-    from zoo.cclip_demo import load_cclip_checkpoint
+    from zoo.captions.query import load_cclip_checkpoint
 
     model = load_cclip_checkpoint(checkpoint)
     episode = episodes[0]

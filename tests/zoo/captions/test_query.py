@@ -9,7 +9,7 @@ import torch
 import zstandard
 
 from zoo.captions.vocabulary import load_vocabulary
-from zoo.cclip_demo import load_cclip_checkpoint, load_clip, run_query, top_captions
+from zoo.captions.query import load_cclip_checkpoint, load_clip, run_query, top_captions
 from zoo.models.cclip import build_cclip
 
 
