@@ -25,9 +25,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from zoo.captions.query import load_cclip_checkpoint
-from zoo.goals.embed_writer import ClipEmbedder, embed_dataset
 from zoo.data.reader import iter_episodes, list_shards
+from zoo.goals.embed_writer import ClipEmbedder, embed_dataset
+from zoo.weights import load_model
 
 RESULTS = Path(__file__).parent / "results" / "embed.json"
 
@@ -71,7 +71,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=RESULTS)
     args = parser.parse_args()
 
-    model = load_cclip_checkpoint(args.checkpoint)
+    model = load_model(args.checkpoint, "cclip")
     embedder = ClipEmbedder(model, args.batch_size)
     episodes = [e["frames"] for e in
                 itertools.islice(iter_episodes(list_shards(args.src)), args.episodes)]

@@ -16,9 +16,9 @@ from __future__ import annotations
 import torch
 
 from lit_models.sequence_bc import IGNORE_ACTION, SequenceBC
-from zoo.export import load_policy_model
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.models.steve import Conditioning, SteveConfig, SteveModel
+from zoo.weights import load_model
 
 
 class CSteve1(SequenceBC):
@@ -84,7 +84,7 @@ class CSteve1(SequenceBC):
         if hasattr(self, "model"):
             return
         if self.hparams.backbone_config is None:
-            cvpt = load_policy_model(self.hparams.backbone).train()
+            cvpt = load_model(self.hparams.backbone, "cvpt").train()
             self.hparams["backbone_config"] = cvpt.config.to_dict()
         else:
             cvpt = CVPTModel(CVPTConfig.from_dict(self.hparams.backbone_config))

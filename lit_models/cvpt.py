@@ -13,9 +13,9 @@ from pathlib import Path
 import torch
 
 from lit_models.sequence_bc import SequenceBC
-from zoo.checkpoint_io import CheckpointError
-from zoo.export import load_checkpoint_model, load_exported
 from zoo.models.cvpt import CVPTConfig, CVPTModel
+from zoo.weights import load_model
+from zoo.weights.checkpoint_io import CheckpointError
 
 
 def _network_weights(path: str, config: CVPTConfig) -> dict[str, torch.Tensor]:
@@ -27,7 +27,7 @@ def _network_weights(path: str, config: CVPTConfig) -> dict[str, torch.Tensor]:
             " --model.init_args.init_weights=null)"
         )
     try:
-        source = load_exported(path) if Path(path).is_dir() else load_checkpoint_model(path)
+        source = load_model(path, "cvpt")
     except CheckpointError as err:
         raise CheckpointError(f"model.init_weights: {err}") from None
     if source.config != config:

@@ -10,9 +10,9 @@ import torch
 
 from lit_models.cli import run_lightning_cli
 from zoo.cli import main
-from zoo.export import save_exported
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.models.prior import CVAEPrior, PriorConfig
+from zoo.weights.export import save_exported
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "csteve1_cpu.yaml"
 

@@ -17,13 +17,13 @@ TOPS = ("zoo", "lit_models", "datamodules")
 
 # top (0) to bottom; a package's layer is the first entry that is a prefix of its module name
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("zoo.cli", "zoo.pipeline", "zoo.demo", "zoo.export_cli"),
+    ("zoo.cli", "zoo.pipeline", "zoo.demo"),
     ("lit_models", "datamodules"),
     ("zoo.eval", "zoo.rl"),
     ("zoo.agents",),
     ("zoo.goals", "zoo.data", "zoo.captions"),
-    ("zoo.weights", "zoo.export", "zoo.models", "zoo.experts"),
-    ("zoo.envs", "zoo.argtypes", "zoo.strict_config", "zoo.files", "zoo.checkpoint_io"),
+    ("zoo.weights", "zoo.models", "zoo.experts"),
+    ("zoo.envs", "zoo.argtypes", "zoo.strict_config", "zoo.files"),
 )
 
 
@@ -138,12 +138,8 @@ KNOWN_UPWARD = {
     "zoo.data.dagger -> zoo.agents.base",
     "zoo.data.generate -> zoo.agents",
 }
-KNOWN_MUTUAL = {
-    "zoo.export <-> zoo.models",
-}
-KNOWN_CYCLES = {
-    "zoo.export -> zoo.models.prior",
-}
+KNOWN_MUTUAL: set[str] = set()
+KNOWN_CYCLES: set[str] = set()
 
 
 def test_no_import_goes_up_a_layer() -> None:

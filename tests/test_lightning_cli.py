@@ -70,10 +70,10 @@ def test_fit_writes_run_folder_and_resumes_at_the_same_step(
 
     # the checkpoint plays and exports without Lightning
     from zoo.cli import main as zoo_main
-    from zoo.export import load_checkpoint_model, load_exported
+    from zoo.weights import load_model
 
     assert zoo_main(["export", str(last), str(tmp_path / "export")]) == 0
-    assert load_exported(tmp_path / "export").config == load_checkpoint_model(last).config
+    assert load_model(tmp_path / "export").config == load_model(last, "cvpt").config
 
     resumed = _fit(crafterplay, tmp_path, 3, f"--ckpt_path={last}")
     assert started == [0, 2]
@@ -102,8 +102,9 @@ def test_every_shipped_config_parses_and_builds(config: Path) -> None:
     """Each YAML in configs/ names real arguments and builds its model and datamodule (GPU
     configs on this machine's CPU: the hardware flags are overridden, every other value is the
     file's)."""
-    from lit_models.cli import ZooCLI
     from lightning.pytorch.cli import SaveConfigCallback
+
+    from lit_models.cli import ZooCLI
 
     cli = ZooCLI(
         L.LightningModule, L.LightningDataModule, subclass_mode_model=True,

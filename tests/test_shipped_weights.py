@@ -8,20 +8,12 @@ from pathlib import Path
 import pytest
 import torch
 
-from zoo.agents.steve_agent import load_steve_checkpoint
-from zoo.captions.query import load_cclip_checkpoint
-from zoo.export import CHECKSUM_FILE, exported_kind, load_policy_model, verify_export
-from zoo.models.prior import load_prior
+from zoo.weights import load_model
+from zoo.weights.export import CHECKSUM_FILE, exported_kind, verify_export
 
 WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
 BUDGET_BYTES = 60 * 1024 * 1024
 SHIPPED = sorted(p for p in WEIGHTS.iterdir() if p.is_dir())
-LOADERS = {  # the public loader of each kind, as weights/README.md documents them
-    "cvpt": load_policy_model,
-    "cclip": load_cclip_checkpoint,
-    "prior": load_prior,
-    "csteve1": load_steve_checkpoint,
-}
 
 
 def test_weights_folder_ships_models_within_budget() -> None:
@@ -37,7 +29,7 @@ def test_shipped_folder_verifies_and_loads(folder: Path) -> None:
     verify_export(folder)  # every file in sha256.txt matches
     listed = {line.split()[1] for line in (folder / CHECKSUM_FILE).read_text().splitlines()}
     assert listed == {"model.safetensors", "config.json"}
-    model = LOADERS[exported_kind(folder)](folder)
+    model = load_model(folder, exported_kind(folder))  # the loader weights/README.md documents
     assert not model.training
     floats = {v.dtype for v in model.state_dict().values() if v.is_floating_point()}
     assert floats == {torch.float32}  # half-precision files load as float32

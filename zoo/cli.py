@@ -23,7 +23,7 @@ TOP_LEVEL = (
     ("zoo.eval.compare", "register"),
     ("zoo.captions.cli", "register"),
     ("zoo.experts.cli", "register"),
-    ("zoo.export_cli", "register"),
+    ("zoo.weights.cli", "register"),
     ("zoo.demo", "register"),
     ("zoo.eval.play", "register"),
     ("zoo.rl.cli", "register"),
@@ -94,7 +94,7 @@ def _stdout_reader_gone() -> bool:
 def _run(argv: list[str]) -> int:
     if argv and argv[0] in TRAIN_VERBS:
         from lit_models.cli import DataNotFoundError, run_lightning_cli
-        from zoo.checkpoint_io import CheckpointError
+        from zoo.weights.checkpoint_io import CheckpointError
 
         try:
             run_lightning_cli(argv)

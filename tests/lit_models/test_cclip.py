@@ -11,9 +11,9 @@ import zstandard
 
 from datamodules.craftercaption import CrafterCaptionDataModule
 from lit_models.cclip import CCLIP
-from zoo.captions.query import load_cclip_checkpoint
 from zoo.captions.dataset import EpisodeInfo, _encode_sample, _write_tar
 from zoo.captions.vocabulary import load_vocabulary
+from zoo.weights import load_model
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -155,7 +155,7 @@ def test_fit_validate_and_reload_from_checkpoint(caption_root, tmp_path):
             reloaded.model.encode_text(["kill cow"]), module.model.encode_text(["kill cow"])
         )
     assert reloaded.config == module.config
-    plain = load_cclip_checkpoint(path)  # the Lightning-free loader of zoo.captions.query
+    plain = load_model(path, "cclip")  # the Lightning-free loader of zoo.captions.query
     with torch.no_grad():
         torch.testing.assert_close(plain.encode_video(clips), module.model.encode_video(clips))
 

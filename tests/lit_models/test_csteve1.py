@@ -11,8 +11,8 @@ import torch
 from torch.utils.data import DataLoader
 
 from lit_models.csteve1 import CSteve1
-from zoo.export import save_exported
 from zoo.models.cvpt import CVPTConfig, CVPTModel
+from zoo.weights.export import save_exported
 
 GOAL_DIM = 17  # one-hot goals naming the action to take
 

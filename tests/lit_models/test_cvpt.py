@@ -13,8 +13,8 @@ from torch.utils.data import DataLoader
 
 from lit_models.cvpt import CVPT
 from lit_models.schedules import WarmupCosine
-from zoo.checkpoint_io import CheckpointError
-from zoo.export import load_checkpoint_model
+from zoo.weights import load_model
+from zoo.weights.checkpoint_io import CheckpointError
 
 SMALL = dict(
     model="tiny", d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=[4, 8, 8],
@@ -142,7 +142,7 @@ def test_checkpoint_reload_gives_identical_logits(tmp_path: Path) -> None:
         reloaded = CVPT.load_from_checkpoint(path).eval()
         assert torch.equal(reloaded(batch["frames"], batch["first"]), expected)
         # the same file, read with weights_only torch.load and no Lightning
-        plain = load_checkpoint_model(path)
+        plain = load_model(path, "cvpt")
         logits, _ = plain(batch["frames"], batch["first"], plain.initial_state(2))
     torch.testing.assert_close(logits, expected, atol=1e-5, rtol=0)
 

@@ -9,8 +9,8 @@ import pytest
 
 from lit_models.cli import run_lightning_cli
 from lit_models.online_eval import OnlineEvaluation
-from zoo.agents.steve_agent import load_steve_checkpoint
 from zoo.data.generate import GenerationConfig, generate
+from zoo.weights import load_model
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "cvpt_smoke.yaml"
@@ -58,7 +58,7 @@ def test_c_steve_1_is_scored_on_its_task_with_its_instruction():
         instruction="obtain sapling", cclip=str(weights["cclip_cpu"]),
         prior=str(weights["prior_cpu"]), video=True,
     )
-    metrics, rates, frames = callback.evaluate(load_steve_checkpoint(weights["csteve1_cpu"]))
+    metrics, rates, frames = callback.evaluate(load_model(weights["csteve1_cpu"], "csteve1"))
     assert 0 <= metrics["online/task_success"] <= 100
     assert set(rates) >= {"collect_sapling", "collect_wood"}
     assert frames is not None and frames.shape[1:] == (144, 144, 3) and len(frames) >= 2

@@ -9,7 +9,7 @@ from torch.nn import functional as F
 
 from datamodules.prior_pairs import PriorPairsDataModule
 from lit_models.prior import VALIDATION_SEED, CVAEPriorModule
-from zoo.models.prior import load_prior
+from zoo.weights import load_model
 
 DIM = 8
 
@@ -79,7 +79,7 @@ def test_fit_logs_losses_and_cosines_and_reloads_without_lightning(pairs, tmp_pa
     assert float(metrics["val/cos_mean"]) > 0.7
 
     (path,) = (tmp_path / "checkpoints").glob("*.ckpt")
-    loaded = load_prior(path)
+    loaded = load_model(path, "prior")
     text = torch.from_numpy(np.load(pairs)["text"][:5])
     torch.testing.assert_close(loaded.sample(text, mean=True), module(text))
     torch.testing.assert_close(

@@ -14,11 +14,11 @@ import pytest
 import torch
 
 from zoo.agents.steve_agent import GoalEncoder, instruction_note
-from zoo.captions.query import load_cclip_checkpoint
-from zoo.checkpoint_io import CheckpointError, read_torch_file
 from zoo.cli import main
 from zoo.files import sha256_file
-from zoo.export import CHECKSUM_FILE, CONFIG_FILE, WEIGHTS_FILE, load_exported
+from zoo.weights import load_model
+from zoo.weights.checkpoint_io import CheckpointError, read_torch_file
+from zoo.weights.export import CHECKSUM_FILE, CONFIG_FILE, WEIGHTS_FILE
 
 WEIGHTS = Path(__file__).resolve().parents[2] / "weights"
 EXPECTED = "expected a `zoo fit` checkpoint (.ckpt) or a `zoo export` folder"
@@ -143,7 +143,7 @@ def test_a_malformed_sha256_txt_names_its_line(tmp_path) -> None:
     folder = _export_folder(tmp_path)
     (folder / CHECKSUM_FILE).write_text("not-a-sum-line\n")
     with pytest.raises(CheckpointError, match=rf"{folder / CHECKSUM_FILE} line 1: expected"):
-        load_exported(folder)
+        load_model(folder)
 
 
 def _write_config(folder: Path, text: str) -> None:
@@ -162,7 +162,7 @@ def test_a_corrupt_config_json_names_the_file_and_where(tmp_path, capsys) -> Non
     where = r"line 3 column \d+"
     message = rf"{folder / CONFIG_FILE}: not valid JSON \(.*{where}"
     with pytest.raises(CheckpointError, match=message):
-        load_exported(folder)
+        load_model(folder)
     assert _eval(folder, tmp_path / "eval") == 2
     err = _one_error_line(capsys, "eval")
     assert f"{folder / CONFIG_FILE}: not valid JSON" in err and "line 3 column" in err
@@ -172,12 +172,12 @@ def test_a_config_json_that_is_not_an_object_is_named(tmp_path) -> None:
     folder = _export_folder(tmp_path)
     _write_config(folder, json.dumps(["cvpt"]))
     with pytest.raises(CheckpointError, match=rf"{folder / CONFIG_FILE}: holds a JSON list"):
-        load_exported(folder)
+        load_model(folder)
 
 
 @pytest.fixture(scope="module")
 def shipped_goals() -> GoalEncoder:
-    return GoalEncoder(load_cclip_checkpoint(WEIGHTS / "cclip_cpu"))
+    return GoalEncoder(load_model(WEIGHTS / "cclip_cpu", "cclip"))
 
 
 def test_a_caption_is_its_own_nearest_caption(shipped_goals) -> None:

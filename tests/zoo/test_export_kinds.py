@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -16,26 +17,23 @@ import torch
 from torch import nn
 
 from zoo.agents import checkpoint_kind
-from zoo.agents.steve_agent import load_steve_checkpoint
-from zoo.captions.query import load_cclip_checkpoint
 from zoo.cli import main as zoo_main
 from zoo.files import sha256_file
-from zoo.export import (
+from zoo.models.cclip import build_cclip
+from zoo.models.cvpt import CVPTConfig, CVPTModel
+from zoo.models.prior import CVAEPrior, PriorConfig
+from zoo.models.steve import SteveConfig, SteveModel
+from zoo.weights import load_model
+from zoo.weights.cli import DTYPE_CHOICES
+from zoo.weights.export import (
     CONFIG_FILE,
     DTYPES,
     WEIGHTS_FILE,
     export_checkpoint,
     exported_kind,
     kind_of_hparams,
-    load_exported,
-    load_policy_model,
     save_exported,
 )
-from zoo.export_cli import DTYPE_CHOICES
-from zoo.models.cclip import build_cclip
-from zoo.models.cvpt import CVPTConfig, CVPTModel
-from zoo.models.prior import CVAEPrior, PriorConfig, load_prior
-from zoo.models.steve import SteveConfig, SteveModel
 
 CVPT_SIZES = {
     "d_model": 32,
@@ -128,11 +126,11 @@ def _steve_outputs(model: nn.Module) -> list[torch.Tensor]:
 
 
 KINDS: dict[str, tuple[Callable, Callable, Callable]] = {
-    # kind: (model + hyper-parameters, outputs on fixed inputs, the model's public loader)
-    "cvpt": (_cvpt, _cvpt_outputs, load_policy_model),
-    "cclip": (_cclip, _cclip_outputs, load_cclip_checkpoint),
-    "prior": (_prior, _prior_outputs, load_prior),
-    "csteve1": (_steve, _steve_outputs, load_steve_checkpoint),
+    # kind: (model + hyper-parameters, outputs on fixed inputs, the one loader for this kind)
+    "cvpt": (_cvpt, _cvpt_outputs, partial(load_model, kind="cvpt")),
+    "cclip": (_cclip, _cclip_outputs, partial(load_model, kind="cclip")),
+    "prior": (_prior, _prior_outputs, partial(load_model, kind="prior")),
+    "csteve1": (_steve, _steve_outputs, partial(load_model, kind="csteve1")),
 }
 
 
@@ -230,10 +228,10 @@ def test_tampered_or_incomplete_folder_is_named(tmp_path: Path) -> None:
     config = out / CONFIG_FILE
     config.write_text(config.read_text().replace('"hidden": 32', '"hidden": 33'))
     with pytest.raises(ValueError, match=r"checksum mismatch for .*config.json"):
-        load_prior(out)
+        load_model(out, "prior")
     (out / WEIGHTS_FILE).unlink()
     with pytest.raises(FileNotFoundError, match=r"model.safetensors missing"):
-        load_prior(out)
+        load_model(out, "prior")
     with pytest.raises(ValueError, match="dtype 'int8'"):
         save_exported(model, tmp_path / "bad", "int8")
 
@@ -250,7 +248,7 @@ def test_cvpt_export_without_kind_still_loads(tmp_path: Path) -> None:
         "".join(f"{sha256_file(out / name)}  {name}\n" for name in (WEIGHTS_FILE, CONFIG_FILE))
     )
     assert exported_kind(out) == "cvpt" and checkpoint_kind(out) == "cvpt"
-    assert load_exported(out).config == model.config
+    assert load_model(out).config == model.config
 
 
 def test_cli_flags_positional_form_and_errors(tmp_path: Path, capsys) -> None:
@@ -281,7 +279,7 @@ def test_cli_flags_positional_form_and_errors(tmp_path: Path, capsys) -> None:
     assert "exported prior" in capsys.readouterr().out
     assert json.loads((tmp_path / "a" / CONFIG_FILE).read_text())["dtype"] == "float16"
     assert zoo_main(["export", str(path), str(tmp_path / "b")]) == 0
-    assert load_prior(tmp_path / "b").config == model.config
+    assert load_model(tmp_path / "b", "prior").config == model.config
     assert zoo_main(["export", str(path), "--out", str(tmp_path / "c")]) == 2
     assert (
         zoo_main(

@@ -6,7 +6,8 @@ import pytest
 import torch
 from torch.distributions import Normal, kl_divergence
 
-from zoo.models.prior import CVAEPrior, PriorConfig, gaussian_kl, load_prior
+from zoo.models.prior import CVAEPrior, PriorConfig, gaussian_kl
+from zoo.weights import load_model
 
 CONFIG = PriorConfig(embed_dim=16, hidden=32, latent_dim=4)
 
@@ -100,12 +101,12 @@ def test_checkpoint_reload_gives_identical_outputs(tmp_path):
     hparams = {"embed_dim": 16, "hidden": 32, "latent_dim": 4, "kl_weight": 1.0, "lr": 1e-3}
     state = {f"model.{key}": value for key, value in model.state_dict().items()}
     torch.save({"hyper_parameters": hparams, "state_dict": state}, tmp_path / "prior.ckpt")
-    loaded = load_prior(tmp_path / "prior.ckpt")
+    loaded = load_model(tmp_path / "prior.ckpt", "prior")
     assert loaded.config == CONFIG and not loaded.training
     z_t = unit_rows(4, 16, 3)
     torch.testing.assert_close(loaded.sample(z_t, mean=True), model.sample(z_t, mean=True))
     with pytest.raises(FileNotFoundError, match="nothing.ckpt"):
-        load_prior(tmp_path / "nothing.ckpt")
+        load_model(tmp_path / "nothing.ckpt", "prior")
     torch.save({"state_dict": {}}, tmp_path / "other.ckpt")
     with pytest.raises(ValueError, match="hyper_parameters"):
-        load_prior(tmp_path / "other.ckpt")
+        load_model(tmp_path / "other.ckpt", "prior")

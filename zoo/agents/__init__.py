@@ -140,12 +140,12 @@ def checkpoint_kind(path: str | Path) -> str:
         return "rl"
     if path.is_file() and path.suffix == ".ckpt":
         from zoo.agents.steve_agent import is_steve_checkpoint
-        from zoo.checkpoint_io import read_torch_file
+        from zoo.weights.checkpoint_io import read_torch_file
 
         return "csteve1" if is_steve_checkpoint(read_torch_file(path)) else "cvpt"
     if path.is_dir():
         if (path / "model.safetensors").is_file() or (path / "sha256.txt").is_file():
-            from zoo.export import KINDS, exported_kind
+            from zoo.weights.export import KINDS, exported_kind
 
             kind = exported_kind(path)
             if kind not in ("cvpt", "csteve1"):

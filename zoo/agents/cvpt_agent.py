@@ -9,9 +9,9 @@ import torch
 
 from zoo.agents.base import EpisodeStreams
 from zoo.envs.base import Step
-from zoo.export import load_policy_model
 from zoo.models.cvpt import CVPTModel
 from zoo.models.trxl import TrXLState
+from zoo.weights import load_model
 
 
 def sample_actions(
@@ -53,7 +53,7 @@ class CVPTPolicy:
     @classmethod
     def load(cls, path: str | Path, device: str = "cpu", **kwargs) -> CVPTPolicy:
         """From a Lightning .ckpt of ``zoo fit`` or a ``zoo export`` folder, without Lightning."""
-        return cls(load_policy_model(path), device, **kwargs)
+        return cls(load_model(path, "cvpt"), device, **kwargs)
 
     def initial_state(self, n: int) -> TrXLState:
         """Empty memory for n envs: their next step attends to nothing before it."""
@@ -116,7 +116,7 @@ class CVPTAgent:
         greedy: bool = False,
     ) -> CVPTAgent:
         """Load a Lightning .ckpt from ``zoo fit`` or a folder from ``zoo export``."""
-        policy = CVPTPolicy(load_policy_model(path), device, temperature, greedy)
+        policy = CVPTPolicy(load_model(path, "cvpt"), device, temperature, greedy)
         return cls(policy, num_envs)
 
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> None:

@@ -1,7 +1,5 @@
 """Instructions in, actions out: C-Steve-1 with goals from text, captions or clips, and CFG.
 
-- ``load_steve_checkpoint``: the network of a ``zoo fit --config configs/csteve1*.yaml`` run,
-  without Lightning (its hyper-parameters hold the backbone's architecture).
 - ``GoalEncoder``: a goal embedding from a text instruction (C-CLIP text tower, then the CVAE
   prior, paper §4.3 "Inference"), from a caption id (its caption text, the same way), or from a
   6-frame video clip (C-CLIP video tower, what training used).
@@ -24,22 +22,16 @@ from torch.nn import functional as F
 
 from zoo.agents.base import EpisodeStreams
 from zoo.agents.cvpt_agent import sample_actions
-from zoo.captions.query import load_cclip_checkpoint
 from zoo.envs.base import Step
-from zoo.export import load_model
 from zoo.models.cclip import CCLIPModel
-from zoo.models.prior import CVAEPrior, load_prior
+from zoo.models.prior import CVAEPrior
 from zoo.models.steve import SteveModel
 from zoo.models.trxl import TrXLState
+from zoo.weights import load_model
 
 
 def is_steve_checkpoint(checkpoint: dict) -> bool:
     return "backbone_config" in checkpoint.get("hyper_parameters", {})
-
-
-def load_steve_checkpoint(path: str | Path) -> SteveModel:
-    """The C-Steve-1 network, in eval mode, of a Lightning checkpoint or a `zoo export` folder."""
-    return load_model(path, "csteve1")
 
 
 class GoalEncoder:
@@ -60,7 +52,7 @@ class GoalEncoder:
     @classmethod
     def load(cls, cclip: str | Path, prior: str | Path | None = None, **kwargs) -> GoalEncoder:
         """From a C-CLIP checkpoint and (for text goals) a prior checkpoint."""
-        return cls(load_cclip_checkpoint(cclip), load_prior(prior) if prior else None, **kwargs)
+        return cls(load_model(cclip, "cclip"), load_model(prior, "prior") if prior else None, **kwargs)
 
     @property
     def goal_dim(self) -> int:
@@ -147,7 +139,7 @@ class StevePolicy:
 
     @classmethod
     def load(cls, path: str | Path, device: str = "cpu", **kwargs) -> StevePolicy:
-        return cls(load_steve_checkpoint(path), device, **kwargs)
+        return cls(load_model(path, "csteve1"), device, **kwargs)
 
     @property
     def goal_dim(self) -> int:
@@ -263,5 +255,4 @@ __all__ = [
     "StevePolicy",
     "instruction_note",
     "is_steve_checkpoint",
-    "load_steve_checkpoint",
 ]

@@ -16,14 +16,8 @@ import torch
 import zstandard
 
 from zoo.captions.vocabulary import load_vocabulary
-from zoo.export import load_model
 from zoo.models.cclip import CCLIPModel
-
-
-def load_cclip_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> CCLIPModel:
-    """A C-CLIP model, in eval mode, from a `zoo fit --config configs/cclip*.yaml` checkpoint
-    or a `zoo export` folder of one (e.g. weights/cclip_cpu)."""
-    return load_model(path, "cclip").to(map_location)
+from zoo.weights.export import load_model
 
 
 def load_clip(path: str | Path) -> np.ndarray:
@@ -59,7 +53,7 @@ def top_captions(
 
 def run_query(args: argparse.Namespace) -> int:
     """Print the best captions for the clip, one `score<TAB>caption` line each."""
-    model = load_cclip_checkpoint(args.checkpoint, args.device)
+    model = load_model(args.checkpoint, "cclip", args.device)
     for caption, score in top_captions(model, load_clip(args.clip), args.k):
         print(f"{score:.3f}\t{caption}")
     return 0

@@ -160,7 +160,7 @@ def _dagger(args) -> int:
     import os
 
     from zoo.data.generate import GenerationConfig
-    from zoo.export import checkpoint_sha256
+    from zoo.weights.export import checkpoint_sha256
 
     learner = Path(args.checkpoint)
     if not learner.exists():

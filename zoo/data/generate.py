@@ -65,7 +65,7 @@ class GenerationConfig:
         zstd_window_log: zstd window (log2 bytes).
         source: "dagger" for DAgger rollouts (``zoo data dagger``); None: the expert plays.
         learner: DAgger: the C-VPT (.ckpt or export folder) that plays; the expert labels.
-        learner_sha256: DAgger: the learner's fingerprint (``zoo.export.checkpoint_sha256``).
+        learner_sha256: DAgger: the learner's fingerprint (``zoo.weights.export.checkpoint_sha256``).
         learner_temperature: DAgger: the learner's sampling temperature.
         beta: DAgger: probability that the expert acts instead of the learner.
         mix: DAgger: "episode" or "step", what one beta draw decides.

@@ -24,6 +24,11 @@ import torch.nn.functional as F
 
 from zoo.captions.rules import CATEGORIES, EpisodeView
 from zoo.captions.vocabulary import load_vocabulary
+from zoo.data.manifest import MANIFEST, load_manifest
+from zoo.data.reader import CorruptShardError, iter_episodes
+from zoo.data.shards import tar_member, write_tar
+from zoo.envs.schema import FRAME_SHAPE
+from zoo.files import atomic_write_text, sha256_file
 from zoo.goals.embed import (
     CAPTION_PRIORITY,
     CLIP,
@@ -38,13 +43,8 @@ from zoo.goals.embed import (
     sample_members,
     step_captions,
 )
-from zoo.data.manifest import MANIFEST, load_manifest
-from zoo.data.reader import CorruptShardError, iter_episodes
-from zoo.data.shards import tar_member, write_tar
-from zoo.envs.schema import FRAME_SHAPE
-from zoo.export import checkpoint_sha256
-from zoo.files import atomic_write_text, sha256_file
 from zoo.models.cclip import CCLIPModel
+from zoo.weights.export import checkpoint_sha256
 
 
 class ClipEmbedder:
@@ -217,13 +217,13 @@ def embed_dataset(
     """
     from tqdm import tqdm
 
-    from zoo.captions.query import load_cclip_checkpoint
+    from zoo.weights import load_model
 
     src, out = Path(src), Path(out)
     play = load_manifest(src)
     if play is None:
         raise FileNotFoundError(f"{src / MANIFEST} not found: not a CrafterPlay folder")
-    model = load_cclip_checkpoint(checkpoint, device)
+    model = load_model(checkpoint, "cclip", device)
     embedder = ClipEmbedder(model, batch_size)
     settings = {
         "format": FORMAT, "version": FORMAT_VERSION, "embed_dim": embedder.embed_dim,

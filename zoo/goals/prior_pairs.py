@@ -29,11 +29,11 @@ from tqdm import tqdm
 
 from zoo.captions.dataset import decode_caption_sample, list_caption_shards
 from zoo.captions.vocabulary import Vocabulary, load_vocabulary
-from zoo.captions.query import load_cclip_checkpoint
 from zoo.data.storage import read_bytes
-from zoo.export import checkpoint_sha256
 from zoo.files import atomic_path, atomic_write_text
 from zoo.models.cclip import CCLIPModel
+from zoo.weights import load_model
+from zoo.weights.export import checkpoint_sha256
 
 PAIR_FIELDS = {"video": 2, "text": 2, "caption_id": 1, "variant": 1, "episode": 1, "step": 1}
 """Arrays of a pairs file and their number of dimensions."""
@@ -114,7 +114,7 @@ def write_prior_pairs(
     if max_pairs is not None and max_pairs < total:
         keep[:] = False
         keep[rng.choice(total, max_pairs, replace=False)] = True
-    model = load_cclip_checkpoint(checkpoint, device)
+    model = load_model(checkpoint, "cclip", device)
     vocabulary = load_vocabulary()
     counts = np.array([len(vocabulary.variants(c.text)) for c in vocabulary.captions])
 

@@ -21,7 +21,6 @@ training targets are unit-norm, so they come out close to it.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from pathlib import Path
 from typing import Any
 
 import torch
@@ -133,12 +132,4 @@ class CVAEPrior(nn.Module):
         return self.decode(c, z_t)
 
 
-def load_prior(path: str | Path, map_location: str | torch.device = "cpu") -> CVAEPrior:
-    """The prior, in eval mode and without Lightning, from a `zoo fit --config
-    configs/prior*.yaml` checkpoint or a `zoo export` folder of one (e.g. weights/prior_cpu)."""
-    from zoo.export import load_model  # zoo.export builds this module's CVAEPrior
-
-    return load_model(path, "prior").to(map_location)
-
-
-__all__ = ["CVAEPrior", "PriorConfig", "gaussian_kl", "load_prior"]
+__all__ = ["CVAEPrior", "PriorConfig", "gaussian_kl"]

@@ -3,7 +3,7 @@ fingerprints the output for the stages that read it) or raises why not.
 
 The checks reuse what each format already records: CrafterPlay and goal-embedding shards are
 re-hashed against their manifests (as ``zoo data info`` does), CrafterCaption shards against
-theirs, checkpoints are rebuilt with ``zoo.export.load_model`` (weights-only, no Lightning),
+theirs, checkpoints are rebuilt with ``zoo.weights.export.load_model`` (weights-only, no Lightning),
 reports and prior pairs are parsed.
 """
 
@@ -121,7 +121,7 @@ def prior_pairs(out: Path) -> Path:
 def checkpoint(out: Path, kind: str) -> Path:
     """The run folder's one ``best-*.ckpt`` (the checkpoint validation chose), rebuilt as a
     ``kind`` network without Lightning."""
-    from zoo.export import load_model
+    from zoo.weights.export import load_model
 
     _folder(out)
     found = sorted(out.glob("*/checkpoints/best-*.ckpt"))

@@ -81,7 +81,7 @@ def _data(records: dict) -> Table:
 
 def _checkpoint_numbers(path: Path) -> tuple[int, str, str, int]:
     """(step, monitor, best score, last step) of a ``zoo fit`` best checkpoint."""
-    from zoo.checkpoint_io import read_torch_file
+    from zoo.weights.checkpoint_io import read_torch_file
 
     best = read_torch_file(path, mmap=True)
     last_path = path.with_name("last.ckpt")

@@ -20,9 +20,9 @@ def build_pixel_policy(config: RLConfig) -> nn.Module:
         encoder = FrameEncoder(FRAME_SIZE, config.input_downsample, hidden)
         return RecurrentActorCritic(encoder, hidden, hidden, NUM_ACTIONS).to(config.device)
     if config.agent == "cvpt_rl":
-        from zoo.export import load_policy_model
+        from zoo.weights import load_model
 
-        model = load_policy_model(config.checkpoint)
+        model = load_model(config.checkpoint, "cvpt")
         return CVPTRLPolicy(model, config.lora_rank, config.lora_alpha).to(config.device)
     raise ValueError(
         f"agent {config.agent!r} does not act on pixels alone (PPO-Steve's planner acts through "

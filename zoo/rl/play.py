@@ -14,9 +14,9 @@ import torch
 
 from zoo.agents.base import EpisodeStreams
 from zoo.agents.cvpt_agent import sample_actions
-from zoo.checkpoint_io import CheckpointError, read_torch_file
 from zoo.envs.base import Step
 from zoo.rl.envs import CaptionExecutor, planner_observation
+from zoo.weights.checkpoint_io import CheckpointError, read_torch_file
 
 
 def find_rl_checkpoint(path: str | Path) -> Path:

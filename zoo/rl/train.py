@@ -26,13 +26,13 @@ import numpy as np
 import torch
 import yaml
 
-from zoo.checkpoint_io import read_torch_file
 from zoo.files import atomic_path
 from zoo.rl.agents import build_agent
 from zoo.rl.config import RLConfig
 from zoo.rl.policies import count_parameters
 from zoo.rl.ppo import explained_variance, gae, ppo_loss
 from zoo.rl.window import SeedOrderWindow
+from zoo.weights.checkpoint_io import read_torch_file
 
 COLUMNS = (
     "update", "env_steps", "episodes", "success_rate", "success_rate_100", "subtasks_100",
@@ -308,7 +308,7 @@ def base_sha256(config: RLConfig) -> str | None:
     so loading them onto other weights that share the path is refused."""
     if config.checkpoint is None:
         return None
-    from zoo.export import checkpoint_sha256
+    from zoo.weights.export import checkpoint_sha256
 
     return checkpoint_sha256(config.checkpoint)
 

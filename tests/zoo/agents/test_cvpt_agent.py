@@ -10,8 +10,9 @@ import torch
 
 from zoo.agents.cvpt_agent import CVPTAgent, CVPTPolicy
 from zoo.envs.base import Step
-from zoo.export import export_checkpoint, load_exported, load_policy_model
 from zoo.models.cvpt import CVPTConfig, CVPTModel
+from zoo.weights import load_model
+from zoo.weights.export import export_checkpoint
 
 HPARAMS = dict(
     model="tiny", d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=[4, 8, 8],
@@ -38,7 +39,7 @@ def _frames(n: int, t: int, seed: int = 0) -> np.ndarray:
 
 def test_policy_steps_match_full_window(checkpoint) -> None:
     path, model = checkpoint
-    policy = CVPTPolicy(load_policy_model(path))
+    policy = CVPTPolicy(load_model(path, "cvpt"))
     frames = _frames(2, 7)
     first = np.zeros((7, 2), bool)
     first[0] = True
@@ -59,7 +60,7 @@ def test_policy_steps_match_full_window(checkpoint) -> None:
 
 def test_greedy_is_argmax_and_sampling_follows_uniforms(checkpoint) -> None:
     path, _ = checkpoint
-    model = load_policy_model(path)
+    model = load_model(path, "cvpt")
     frames, first = _frames(3, 1)[0], np.ones(3, bool)
     greedy = CVPTPolicy(model, greedy=True)
     logits, _ = greedy.logits(frames, greedy.initial_state(3), first)
@@ -103,7 +104,7 @@ def test_export_round_trip_and_checksum(checkpoint, tmp_path: Path) -> None:
     path, model = checkpoint
     out = export_checkpoint(path, tmp_path / "export")
     assert sorted(p.name for p in out.iterdir()) == ["config.json", "model.safetensors", "sha256.txt"]
-    loaded = load_exported(out)
+    loaded = load_model(out)
     assert loaded.config == model.config
     for key, value in model.state_dict().items():
         assert torch.equal(loaded.state_dict()[key], value)
@@ -114,16 +115,16 @@ def test_export_round_trip_and_checksum(checkpoint, tmp_path: Path) -> None:
     data[-1] ^= 0xFF
     weights.write_bytes(bytes(data))
     with pytest.raises(ValueError, match="checksum mismatch for .*model.safetensors"):
-        load_exported(out)
+        load_model(out)
 
 
 def test_not_a_checkpoint_is_a_clear_error(tmp_path: Path) -> None:
     path = tmp_path / "weights.pt"
     torch.save({"weights": torch.zeros(1)}, path)
     with pytest.raises(ValueError, match="not a Lightning checkpoint"):
-        load_policy_model(path)
+        load_model(path, "cvpt")
     with pytest.raises(FileNotFoundError, match="not a `zoo export` folder"):
-        load_exported(tmp_path)
+        load_model(tmp_path)
 
 
 def test_zoo_eval_plays_a_checkpoint_without_agent_name(checkpoint, tmp_path: Path) -> None:

@@ -8,9 +8,10 @@ import pytest
 import torch
 import zstandard
 
+from zoo.captions.query import load_clip, run_query, top_captions
 from zoo.captions.vocabulary import load_vocabulary
-from zoo.captions.query import load_cclip_checkpoint, load_clip, run_query, top_captions
 from zoo.models.cclip import build_cclip
+from zoo.weights import load_model
 
 
 @pytest.fixture(scope="module")
@@ -27,7 +28,7 @@ def checkpoint(tmp_path_factory):
 
 def test_checkpoint_rebuilds_the_same_model(checkpoint):
     path, model = checkpoint
-    loaded = load_cclip_checkpoint(path)
+    loaded = load_model(path, "cclip")
     assert loaded.config == model.config and not loaded.training
     with torch.no_grad():
         torch.testing.assert_close(
@@ -36,7 +37,7 @@ def test_checkpoint_rebuilds_the_same_model(checkpoint):
 
 
 def test_top_captions_are_sorted_probabilities_over_the_vocabulary(checkpoint):
-    model = load_cclip_checkpoint(checkpoint[0])
+    model = load_model(checkpoint[0], "cclip")
     clip = np.random.default_rng(0).integers(0, 256, (6, 144, 144, 3), dtype=np.uint8)
     best = top_captions(model, clip, k=5)
     assert len(best) == 5
@@ -67,7 +68,7 @@ def test_clip_files_and_query_command(checkpoint, tmp_path, capsys):
 
 def test_missing_or_foreign_checkpoint_is_named(tmp_path):
     with pytest.raises(FileNotFoundError, match="nothing.ckpt"):
-        load_cclip_checkpoint(tmp_path / "nothing.ckpt")
+        load_model(tmp_path / "nothing.ckpt", "cclip")
     torch.save({"state_dict": {}}, tmp_path / "other.ckpt")
     with pytest.raises(ValueError, match="hyper_parameters"):
-        load_cclip_checkpoint(tmp_path / "other.ckpt")
+        load_model(tmp_path / "other.ckpt", "cclip")

@@ -14,8 +14,8 @@ from zoo.data.dagger import DaggerMixture
 from zoo.data.reader import iter_episodes
 from zoo.envs.base import Step
 from zoo.experts.scripted import ScriptedExpert
-from zoo.export import checkpoint_sha256, save_exported
 from zoo.models.cvpt import CVPTConfig, CVPTModel
+from zoo.weights.export import checkpoint_sha256, save_exported
 
 SIZES = dict(d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(4, 8, 8),
              encoder_hidden=32, memory_len=3)

@@ -17,6 +17,7 @@ import zoo.goals.embed as embed_module
 from zoo.captions.rules import EpisodeView, scan_episode
 from zoo.captions.vocabulary import load_vocabulary
 from zoo.cli import main
+from zoo.data.reader import iter_episodes, list_shards
 from zoo.goals.embed import (
     CAPTION_PRIORITY,
     EmbeddingMismatchError,
@@ -26,7 +27,6 @@ from zoo.goals.embed import (
     step_captions,
 )
 from zoo.goals.embed_writer import ClipEmbedder
-from zoo.data.reader import iter_episodes, list_shards
 from zoo.models.cclip import build_cclip
 
 SHARD_KEYS = {"index", "file", "source_file", "source_sha256", "episodes", "steps", "sha256"}
@@ -118,9 +118,9 @@ def test_layout_dtypes_and_manifest(play, embedded, checkpoint, episodes):
 
 
 def test_rows_are_encode_video_of_the_clamped_clips(embedded, checkpoint, episodes):
-    from zoo.captions.query import load_cclip_checkpoint
+    from zoo.weights import load_model
 
-    model = load_cclip_checkpoint(checkpoint)
+    model = load_model(checkpoint, "cclip")
     episode = episodes[0]
     frames, length = episode["frames"], len(episode["frames"])
     clips = np.stack([frames[[min(max(s, 0), length - 1) for s in range(t - 4, t + 2)]]

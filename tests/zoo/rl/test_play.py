@@ -12,10 +12,10 @@ import torch
 from zoo.agents import checkpoint_kind, load_checkpoint_agent
 from zoo.cli import main
 from zoo.envs.base import Step
-from zoo.export import save_exported
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.rl.config import RLConfig
 from zoo.rl.train import list_checkpoints, train_rl
+from zoo.weights.export import save_exported
 
 TINY = RLConfig(
     agent="ppo_rnn", task="T2", env="crafter", num_envs=2, num_steps=4, total_env_steps=8,
@@ -72,9 +72,9 @@ def test_lora_weights_on_a_changed_base_model_are_refused(tmp_path):
 
 def test_ppo_steve_plays_its_planner_every_option_and_restarts_it_with_an_episode():
     from tests.zoo.rl.test_envs import _steve
-    from zoo.rl.play import PlannerAgent
     from zoo.rl.agents import planner_network
     from zoo.rl.envs import CaptionExecutor
+    from zoo.rl.play import PlannerAgent
 
     steve = _steve()
     goals = torch.randn(5, 8, generator=torch.Generator().manual_seed(1))

@@ -21,9 +21,9 @@ import torch
 from safetensors.torch import load_file, save_file
 from torch import nn
 
-from zoo.checkpoint_io import ZOO_CHECKPOINT, CheckpointError, read_torch_file
 from zoo.files import sha256_file
 from zoo.models.cvpt import CVPTConfig, CVPTModel
+from zoo.weights.checkpoint_io import ZOO_CHECKPOINT, CheckpointError, read_torch_file
 
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
@@ -190,16 +190,6 @@ def _as_float32(tensor: torch.Tensor) -> torch.Tensor:
     return tensor.float() if tensor.is_floating_point() else tensor
 
 
-def load_checkpoint(path: str | Path, kind: str) -> nn.Module:
-    """The ``kind`` network of a Lightning .ckpt, in eval mode, without Lightning."""
-    return _build(*read_lightning_checkpoint(path, kind))
-
-
-def load_checkpoint_model(ckpt_path: str | Path) -> CVPTModel:
-    """Rebuild the C-VPT network from a Lightning .ckpt."""
-    return load_checkpoint(ckpt_path, "cvpt")
-
-
 def checkpoint_sha256(path: str | Path) -> str:
     """Fingerprint of a model: a .ckpt's own sha256, an export folder's sha256.txt's (which
     pins its weights and config), so data made from either records what made it."""
@@ -225,7 +215,7 @@ def _kind_of_model(model: nn.Module) -> str:
 
 
 def save_exported(model: nn.Module, out_dir: str | Path, dtype: str = "float32") -> Path:
-    """Write a network as safetensors + config + checksums (what ``load_exported`` reads).
+    """Write a network as safetensors + config + checksums (what ``load_model`` reads).
 
     ``dtype`` (float32, float16, bfloat16) is how floating-point weights are stored.
     """
@@ -297,11 +287,12 @@ def exported_kind(out_dir: str | Path) -> str:
     return kind
 
 
-def load_exported(out_dir: str | Path, kind: str = "cvpt") -> nn.Module:
-    """The ``kind`` network of an export folder, float32 and in eval mode, after checking sums."""
+def _load_exported(out_dir: str | Path, kind: str | None) -> nn.Module:
+    """The network of an export folder, float32 and in eval mode, after checking its sums."""
     out = Path(out_dir)
     verify_export(out)
     found = exported_kind(out)
+    kind = kind or found
     if found != kind:
         raise CheckpointError(
             f"{out / CONFIG_FILE} says kind {found!r} ({KINDS[found].title}), "
@@ -311,11 +302,17 @@ def load_exported(out_dir: str | Path, kind: str = "cvpt") -> nn.Module:
     return _build(kind, config, load_file(out / WEIGHTS_FILE))
 
 
-def load_model(path: str | Path, kind: str) -> nn.Module:
-    """The ``kind`` network at ``path``: a folder is an export, a file a Lightning checkpoint."""
-    return load_exported(path, kind) if Path(path).is_dir() else load_checkpoint(path, kind)
+def load_model(
+    path: str | Path, kind: str | None = None, map_location: str | torch.device = "cpu"
+) -> nn.Module:
+    """The network at ``path``, float32, in eval mode, without Lightning: the one loader.
 
-
-def load_policy_model(path: str | Path) -> CVPTModel:
-    """A C-VPT export folder or Lightning checkpoint."""
-    return load_model(path, "cvpt")
+    A folder is a ``zoo export`` (checked against its ``sha256.txt`` first), a file the ``.ckpt``
+    of a ``zoo fit`` run. ``kind`` ("cvpt", "cclip", "prior", "csteve1") is checked when given
+    (another model's file is an error naming both) and read from the file when not.
+    """
+    if Path(path).is_dir():
+        model = _load_exported(path, kind)
+    else:
+        model = _build(*read_lightning_checkpoint(path, kind))
+    return model.to(map_location)

@@ -21,7 +21,10 @@ def _export(args: argparse.Namespace) -> int:
     if not (checkpoint and out):
         return _fail("needs a checkpoint and an output folder: --checkpoint CKPT --out DIR")
 
-    from zoo.export import export_checkpoint, exported_kind  # torch loads only when exporting
+    from zoo.weights.export import (  # torch loads only when exporting
+        export_checkpoint,
+        exported_kind,
+    )
 
     try:
         path = export_checkpoint(checkpoint, out, args.dtype)
@@ -41,7 +44,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "export",
         help="write a .ckpt of any model as model.safetensors + config.json + sha256.txt",
         description="Export a Lightning checkpoint of C-VPT, C-CLIP, the CVAE prior or "
-        "C-Steve-1 so it loads with plain torch (zoo.export.load_exported, the model's loader, "
+        "C-Steve-1 so it loads with plain torch (zoo.weights.load_model, "
         "or `zoo eval --checkpoint OUT` for the agents).",
     )
     parser.add_argument("--checkpoint", help="Lightning .ckpt written by `zoo fit`")
