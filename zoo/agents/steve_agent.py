@@ -149,6 +149,47 @@ class StevePolicy:
         """Empty memory for n envs (both guidance passes)."""
         return self.model.guidance_state(n, self.device)
 
+    # The goal-free feature API (PPO-Steve's planner observes it). With head conditioning (the
+    # paper's) the goal enters after the Transformer-XL, so one backbone pass per step gives
+    # both the feature and, through ``logits_from_features``, the guided action logits.
+
+    @property
+    def conditioning(self) -> str:
+        """Where the goal enters: "head" (the paper's) or "trxl_input"."""
+        return self.model.config.conditioning
+
+    @property
+    def feature_dim(self) -> int:
+        """Width of ``features``' output (the Transformer-XL's d_model)."""
+        return self.model.backbone.config.d_model
+
+    def feature_state(self, n: int) -> TrXLState:
+        """Empty memory of ``features`` for n envs (one backbone pass, no guidance copy)."""
+        return self.model.initial_state(n, self.device)
+
+    @torch.no_grad()
+    def features(
+        self, frames: np.ndarray, first: np.ndarray, state: TrXLState
+    ) -> tuple[torch.Tensor, TrXLState]:
+        """(N, d_model) goal-free features of one frame per env (``first`` marks episode
+        starts) and the new memory; head conditioning only."""
+        if self.conditioning != "head":
+            raise ValueError(
+                "goal-free features need head conditioning (the paper's); this C-Steve-1 uses "
+                f"{self.conditioning!r}"
+            )
+        frames_t = torch.tensor(np.asarray(frames), device=self.device).unsqueeze(1)
+        first_t = torch.as_tensor(first, device=self.device).unsqueeze(1)
+        hidden, state = self.model.backbone.features(frames_t, first_t, state)
+        return hidden[:, 0], state
+
+    @torch.no_grad()
+    def logits_from_features(self, hidden: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
+        """Guided action logits (N, A) from ``features``' output towards goals (N, D)."""
+        return self.model.guided_head(
+            hidden.unsqueeze(1), goals.unsqueeze(1), self.cfg_scale
+        )[:, 0].float()
+
     @torch.no_grad()
     def logits(
         self,

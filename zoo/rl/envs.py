@@ -108,10 +108,10 @@ class CaptionExecutor:
     """
 
     def __init__(self, steve, goals: torch.Tensor) -> None:
-        if steve.model.config.conditioning != "head":
+        if steve.conditioning != "head":
             raise ValueError(
                 "PPO-Steve reads C-Steve-1's goal-free feature, which needs head conditioning "
-                f"(the paper's); this checkpoint uses {steve.model.config.conditioning!r}"
+                f"(the paper's); this checkpoint uses {steve.conditioning!r}"
             )
         if goals.ndim != 2 or goals.shape[1] != steve.goal_dim:
             raise ValueError(
@@ -123,28 +123,23 @@ class CaptionExecutor:
 
     @property
     def feature_dim(self) -> int:
-        return self.steve.model.backbone.config.d_model
+        return self.steve.feature_dim
 
     def reset(self, n: int) -> None:
         """Empty memory for ``n`` envs."""
-        self._state = self.steve.model.initial_state(n, self.steve.device)
+        self._state = self.steve.feature_state(n)
 
     @torch.no_grad()
     def observe(self, frames: np.ndarray, first: np.ndarray) -> torch.Tensor:
         """Feed the current frames (``first`` marks episode starts); the features (N, d_model)."""
-        frames_t = torch.tensor(np.asarray(frames), device=self.steve.device).unsqueeze(1)
-        first_t = torch.as_tensor(first, device=self.steve.device).unsqueeze(1)
-        hidden, self._state = self.steve.model.backbone.features(frames_t, first_t, self._state)
-        self.hidden = hidden[:, 0]
+        self.hidden, self._state = self.steve.features(frames, first, self._state)
         return self.hidden
 
     @torch.no_grad()
     def logits(self, captions: np.ndarray) -> torch.Tensor:
         """Guided action logits (N, A) at the last observed frames, towards caption ids (N,)."""
         goal = self.goals[torch.as_tensor(np.asarray(captions), device=self.goals.device)]
-        return self.steve.model.guided_head(
-            self.hidden.unsqueeze(1), goal.unsqueeze(1), self.steve.cfg_scale
-        )[:, 0].float()
+        return self.steve.logits_from_features(self.hidden, goal)
 
 
 def planner_observation(hidden: torch.Tensor, last_choice: np.ndarray, num_captions: int):

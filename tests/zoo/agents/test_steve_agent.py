@@ -136,6 +136,22 @@ def test_guidance_scale_zero_is_the_conditional_policy() -> None:
     assert not torch.allclose(guided_logits, plain_logits)
 
 
+def test_one_feature_pass_gives_the_guided_logits_over_several_steps() -> None:
+    """PPO-Steve reads the goal-free feature and then acts towards a caption: the two halves of
+    the feature API must give ``logits``' guided logits, step after step, memory carried."""
+    policy = _policy()
+    goal = torch.randn(3, 64)
+    first = np.array([True, True, True])
+    state, feature_state = policy.initial_state(3), policy.feature_state(3)
+    for t in range(3):
+        frames = _step(3, seed=t).frames
+        expected, state = policy.logits(frames, goal, state, first)
+        hidden, feature_state = policy.features(frames, first, feature_state)
+        assert hidden.shape == (3, policy.feature_dim)
+        torch.testing.assert_close(policy.logits_from_features(hidden, goal), expected)
+        first = np.array([False, t == 0, False])  # env 1 starts a new episode at t = 1
+
+
 def test_mismatched_goal_width_is_named(goals: GoalEncoder) -> None:
     policy = _policy()
     with pytest.raises(ValueError, match=r"goals must have shape \(2, 64\)"):
