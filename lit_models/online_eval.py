@@ -29,7 +29,7 @@ from zoo.envs.tasks import make_task_env
 from zoo.eval.plots import plot_success_rates, write_gif
 from zoo.eval.report import summarize
 from zoo.eval.rollout import evaluate
-from zoo.eval.tasks import evaluate_task, summarize_task
+from zoo.eval.task_eval import evaluate_task, summarize_task
 from zoo.models.steve import SteveModel
 
 

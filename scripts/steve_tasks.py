@@ -26,7 +26,7 @@ from pathlib import Path
 
 from zoo.agents import make_agent
 from zoo.envs.tasks import SINGLE_STEP_TASKS, TASKS, make_task_env
-from zoo.eval.tasks import compare_success, evaluate_task, write_task_report
+from zoo.eval.task_eval import compare_success, evaluate_task, write_task_report
 
 # The control instruction of each task: another task's, chosen to ask for something else
 # (collect <-> craft), so following it cannot complete the task by accident.

@@ -17,7 +17,7 @@ from zoo.envs.base import Step
 from zoo.envs.constants import Achievement, Block, Item
 from zoo.envs.schema import empty_state
 from zoo.envs.tasks import TASKS, SubTask, TaskSpec, make_task_env
-from zoo.eval.tasks import evaluate_task
+from zoo.eval.task_eval import evaluate_task
 from zoo.experts.scripted import ScriptedExpert
 
 

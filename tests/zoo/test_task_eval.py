@@ -8,7 +8,7 @@ import json
 import pytest
 
 from zoo.envs.tasks import LONG_HORIZON_TASKS, SINGLE_STEP_TASKS, TASKS, make_task_env
-from zoo.eval.tasks import (
+from zoo.eval.task_eval import (
     TaskEpisode,
     compare_success,
     evaluate_task,

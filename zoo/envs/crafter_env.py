@@ -33,7 +33,7 @@ _FACING_TO_DIR = {
 }
 
 
-def _material_lookup(material_names: dict[int, str | None]) -> np.ndarray:
+def material_lookup(material_names: dict[int, str | None]) -> np.ndarray:
     """Crafter material id -> zoo Block id."""
     table = np.zeros(max(material_names) + 1, np.uint8)
     for idx, name in material_names.items():
@@ -105,7 +105,7 @@ class CrafterEnv:
         self.num_envs = num_envs
         self.pixels = pixels
         self._envs = [_make_crafter_env(pixels, max_steps) for _ in range(num_envs)]
-        self._lookup = _material_lookup(self._envs[0]._world._mat_names)
+        self._lookup = material_lookup(self._envs[0]._world._mat_names)
         self._frames = np.zeros((num_envs, *FRAME_SHAPE), np.uint8) if pixels else None
         self._state = empty_state(num_envs)
         self._done = np.zeros(num_envs, bool)

@@ -201,9 +201,9 @@ def _announce(args: argparse.Namespace, report: dict) -> None:
 
 
 def run_task_eval(args: argparse.Namespace, agent, num_envs: int, now: datetime) -> int:
-    """``zoo eval --task``: success of ``agent`` on the task (see ``zoo.eval.tasks``)."""
+    """``zoo eval --task``: success of ``agent`` on the task (see ``zoo.eval.task_eval``)."""
     from zoo.envs.tasks import make_task_env
-    from zoo.eval.tasks import evaluate_task, format_task_table, write_task_report
+    from zoo.eval.task_eval import evaluate_task, format_task_table, write_task_report
 
     task = TASKS[args.task]
     instructable = hasattr(agent, "instruct")
