@@ -23,9 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from zoo.data.generate import GenerationConfig, ShardGenerator, episode_seed, generate
+from zoo.agents import dataset_agent
+from zoo.data.generate import GenerationConfig, ShardGenerator, generate
 from zoo.data.info import RAW_FRAME_BYTES, dataset_info
 from zoo.data.reader import iter_chunks, list_shards
+from zoo.envs.base import episode_seed
 
 RESULTS = Path(__file__).parent / "results" / "data.json"
 
@@ -67,7 +69,7 @@ def bench_expert(expert: str, args, workdir: Path) -> dict:
         expert=expert, episodes=args.episodes, seed=args.seed, env=args.env,
         episodes_per_shard=args.episodes, chunk_length=args.chunk_length, max_steps=args.max_steps,
     )
-    gen = ShardGenerator(config, args.num_envs)
+    gen = ShardGenerator(config, args.num_envs, dataset_agent)
     step = gen.env.reset(np.arange(gen.num_envs) + 10**6)  # compile reset/step, warm the agent
     gen.agent.reset(np.arange(gen.num_envs) + 10**6)
     for _ in range(20):

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 from bench_data import play_without_writing
 
+from zoo.agents import dataset_agent
 from zoo.data.generate import GenerationConfig, ShardGenerator, generate
 from zoo.data.info import RAW_FRAME_BYTES, dataset_info
 from zoo.data.reader import iter_chunks, list_shards
@@ -90,7 +91,7 @@ def main() -> None:
         max_steps=args.max_steps,
     )
     configs = {"stored": stored, "rendered": dataclasses.replace(stored, frames="rendered")}
-    gens = {mode: ShardGenerator(cfg, args.num_envs) for mode, cfg in configs.items()}
+    gens = {mode: ShardGenerator(cfg, args.num_envs, dataset_agent) for mode, cfg in configs.items()}
     for gen in gens.values():
         warm_up(gen)
 

@@ -160,12 +160,13 @@ def test_wandb_starts_without_the_anonymous_setting_in_an_existing_folder(
 
 @pytest.fixture(scope="module")
 def crafterplay(tmp_path_factory) -> Path:
+    from zoo.agents import dataset_agent
     from zoo.data.generate import GenerationConfig, generate
 
     out = tmp_path_factory.mktemp("crafterplay")
     config = GenerationConfig(expert="random", episodes=6, seed=1, env="crafter",
                               episodes_per_shard=2, chunk_length=32, max_steps=80)
-    generate(config, out, progress=False)
+    generate(config, out, progress=False, build_agent=dataset_agent)
     return out
 
 

@@ -39,6 +39,8 @@ def package(module: str) -> str:
 
 
 def layer(module: str) -> int:
+    if module.rsplit(".", 1)[-1] == "cli":
+        return 0  # a part's commands (zoo/<part>/cli.py) wire that part to the rest: top layer
     for depth, prefixes in enumerate(LAYERS):
         if any(module == p or module.startswith(p + ".") for p in prefixes):
             return depth
@@ -132,12 +134,7 @@ GRAPH = import_graph()
 
 # What the layout issue (#32) still has to move; each entry goes when its move lands. The
 # tests fail on a new violation and on a listed one that is gone (then delete its line).
-KNOWN_UPWARD = {
-    "zoo.data.cli -> zoo.agents",
-    "zoo.data.dagger -> zoo.agents",
-    "zoo.data.dagger -> zoo.agents.base",
-    "zoo.data.generate -> zoo.agents",
-}
+KNOWN_UPWARD: set[str] = set()
 KNOWN_MUTUAL: set[str] = set()
 KNOWN_CYCLES: set[str] = set()
 

@@ -13,6 +13,7 @@ from lightning.pytorch.loggers import WandbLogger
 
 from lit_models.cli import run_lightning_cli
 from lit_models.cvpt import CVPT
+from zoo.agents import dataset_agent
 from zoo.data.generate import GenerationConfig, generate
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "cvpt_smoke.yaml"
@@ -25,7 +26,7 @@ def crafterplay(tmp_path_factory) -> Path:
         expert="random", episodes=6, seed=1, env="crafter", episodes_per_shard=2,
         chunk_length=32, max_steps=80,
     )
-    generate(config, out, progress=False)
+    generate(config, out, progress=False, build_agent=dataset_agent)
     return out
 
 

@@ -17,6 +17,7 @@ import torch
 
 from datamodules.crafterplay import CrafterPlayDataModule, episode_split
 from datamodules.seeded_shuffle import seeded_loader
+from zoo.agents import dataset_agent
 from zoo.data.generate import GenerationConfig, generate
 from zoo.data.reader import CorruptShardError, filter_noops, iter_chunks, list_shards
 
@@ -31,7 +32,7 @@ def crafterplay(tmp_path_factory) -> Path:
         expert="random", episodes=NUM_EPISODES, seed=0, env="crafter", episodes_per_shard=2,
         chunk_length=32, max_steps=80,
     )
-    generate(config, out, progress=False)
+    generate(config, out, progress=False, build_agent=dataset_agent)
     return out
 
 

@@ -9,6 +9,7 @@ import pytest
 
 from datamodules.crafterplay import CrafterPlayDataModule
 from datamodules.seeded_shuffle import WeightedDraws
+from zoo.agents import dataset_agent
 from zoo.data.generate import GenerationConfig, generate
 from zoo.data.sequences import ShardSources, pack_sequences
 
@@ -18,7 +19,7 @@ def _play(out: Path, seed: int, episodes: int, max_steps: int) -> Path:
         expert="random", episodes=episodes, seed=seed, env="crafter", episodes_per_shard=1,
         chunk_length=32, max_steps=max_steps,
     )
-    generate(config, out, progress=False)
+    generate(config, out, progress=False, build_agent=dataset_agent)
     return out
 
 

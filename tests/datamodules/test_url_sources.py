@@ -18,6 +18,7 @@ import zstandard
 
 from datamodules.craftercaption import CrafterCaptionDataModule
 from datamodules.crafterplay import CrafterPlayDataModule
+from zoo.agents import dataset_agent
 from zoo.captions.dataset import EpisodeInfo, _encode_sample, _write_tar
 from zoo.captions.vocabulary import load_vocabulary
 from zoo.data.generate import GenerationConfig, generate
@@ -42,7 +43,7 @@ def served(tmp_path_factory) -> Iterator[tuple[Path, str]]:
         expert="random", episodes=6, seed=1, env="crafter", episodes_per_shard=2,
         chunk_length=32, max_steps=80,
     )
-    generate(config, folder / "crafterplay", progress=False)
+    generate(config, folder / "crafterplay", progress=False, build_agent=dataset_agent)
     _write_captions(folder / "captions")
     handler = functools.partial(QuietHandler, directory=str(folder))
     server = ThreadingHTTPServer(("127.0.0.1", 0), handler)

@@ -9,6 +9,7 @@ import pytest
 
 from lit_models.cli import run_lightning_cli
 from lit_models.online_eval import OnlineEvaluation
+from zoo.agents import dataset_agent
 from zoo.data.generate import GenerationConfig, generate
 from zoo.weights import load_model
 
@@ -21,7 +22,7 @@ def crafterplay(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("crafterplay")
     generate(GenerationConfig(expert="random", episodes=6, seed=1, env="crafter",
                               episodes_per_shard=2, chunk_length=32, max_steps=80),
-             out, progress=False)
+             out, progress=False, build_agent=dataset_agent)
     return out
 
 

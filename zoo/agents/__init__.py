@@ -119,6 +119,21 @@ def make_agent(
     return FACTORIES[name](checkpoint, num_envs, 1.0 if greedy else temperature, greedy, **options)
 
 
+def dataset_agent(config, num_envs: int) -> Agent:
+    """The agent that plays a CrafterPlay dataset's episodes (``zoo.data.GenerationConfig``):
+    its expert, or for a DAgger dataset the learner/expert mixture. What ``zoo data generate``
+    and ``zoo data dagger`` pass to ``zoo.data.generate.generate`` as ``build_agent``."""
+    if config.source == "dagger":  # the C-VPT learner (.ckpt or export folder) and the expert
+        from zoo.agents.dagger import DaggerMixture
+
+        learner = make_agent("cvpt", num_envs, config.learner,
+                             temperature=config.learner_temperature)
+        expert = make_agent(config.expert, num_envs)
+        return DaggerMixture(learner, expert, num_envs, config.beta, config.mix)
+    return make_agent(config.expert, num_envs, config.checkpoint,
+                      expert_options=config.expert_options)
+
+
 def is_rl_run(path: Path) -> bool:
     """A ``zoo rl train`` run folder (config.yaml + checkpoints/update_*.pt) or one checkpoint."""
     if path.is_dir():
@@ -176,6 +191,7 @@ __all__ = [
     "Agent",
     "RandomAgent",
     "checkpoint_kind",
+    "dataset_agent",
     "load_checkpoint_agent",
     "make_agent",
 ]

@@ -183,6 +183,7 @@ def _dagger(args) -> int:
 
 
 def _run_generation(config, args, command: str) -> int:
+    from zoo.agents import dataset_agent
     from zoo.data.generate import generate
     from zoo.data.manifest import DatasetMismatchError
 
@@ -193,7 +194,7 @@ def _run_generation(config, args, command: str) -> int:
         )
     try:
         manifest = generate(config, args.out, args.workers, args.num_envs, not args.no_progress,
-                            shards=args.shards)
+                            shards=args.shards, build_agent=dataset_agent)
     except DatasetMismatchError as err:
         print(f"zoo data {command}: {err}", file=sys.stderr)
         return 2
@@ -211,8 +212,8 @@ def _run_generation(config, args, command: str) -> int:
 
 
 def _merge(args) -> int:
-    from zoo.data.generate import merge_datasets
     from zoo.data.manifest import DatasetMismatchError
+    from zoo.data.merge import merge_datasets
 
     try:
         manifest = merge_datasets(args.src, args.out)

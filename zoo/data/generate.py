@@ -1,425 +1,21 @@
 """CrafterPlay generation: an expert plays batched envs; episodes become WebDataset shards.
 
-Shard i holds episodes [i*E, (i+1)*E) and episode j is seeded from (seed, j) alone, so a
-shard's bytes depend only on (seed, i) and the generation arguments: never on --workers or
---num-envs. Finished shards are verified by sha256 against the manifest, so a rerun of a
-killed command skips them and redoes the rest.
+``generate`` writes (or finishes) a dataset: one ``ShardGenerator`` in this process, or
+``--workers`` spawned ones (``zoo.data.pool``). Finished shards are verified by sha256 against
+the manifest, so a rerun of a killed command skips them and redoes the rest.
 """
 
 from __future__ import annotations
 
-import collections
-import multiprocessing
-import os
 import shutil
-import traceback
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
-from multiprocessing.connection import Connection, wait
-from multiprocessing.process import BaseProcess
+from dataclasses import asdict
 from pathlib import Path
 
-import numpy as np
-
-from zoo.data.codec import FrameCodec
-from zoo.data.manifest import (
-    DatasetMismatchError,
-    check_same_config,
-    config_diff,
-    load_manifest,
-    new_manifest,
-    package_versions,
-    save_manifest,
-)
-from zoo.data.noop import noop_counts, noop_flags, noop_runs
-from zoo.data.rerender import renderer_version
-from zoo.data.shards import (
-    SHARD_PATTERN,
-    ChunkEncoder,
-    EpisodeRecorder,
-    assemble_shard,
-)
-from zoo.envs.base import Step, episode_seed
-from zoo.envs.constants import ACHIEVEMENT_NAMES
-from zoo.envs.schema import index_state
+from zoo.data.manifest import check_same_config, load_manifest, new_manifest, save_manifest
+from zoo.data.pool import run_pool
+from zoo.data.shard_generator import AgentBuilder, GenerationConfig, ShardGenerator
 from zoo.files import sha256_file
-
-ProgressFn = Callable[[int, int], None]  # (episodes finished, frames recorded) since last call
-
-
-@dataclass(frozen=True)
-class GenerationConfig:
-    """Everything that decides a dataset's content (stored in the manifest as ``config``).
-
-    Args:
-        expert: agent name for ``zoo.agents.make_agent`` ("scripted", "ppo", "random").
-        checkpoint: the expert's checkpoint (PPO), None otherwise.
-        episodes: episodes in the dataset.
-        seed: dataset seed; episode j is seeded from (seed, j).
-        env: "craftax" or "crafter".
-        episodes_per_shard: episodes per tar shard.
-        chunk_length: steps per WebDataset sample.
-        max_steps: episode step limit.
-        min_noop_run: filter threshold used for the noop statistics in the manifest.
-        zstd_level: zstd level for frames and arrays.
-        zstd_window_log: zstd window (log2 bytes).
-        source: "dagger" for DAgger rollouts (``zoo data dagger``); None: the expert plays.
-        learner: DAgger: the C-VPT (.ckpt or export folder) that plays; the expert labels.
-        learner_sha256: DAgger: the learner's fingerprint (``zoo.weights.export.checkpoint_sha256``).
-        learner_temperature: DAgger: the learner's sampling temperature.
-        beta: DAgger: probability that the expert acts instead of the learner.
-        mix: DAgger: "episode" or "step", what one beta draw decides.
-        round: DAgger: the round number, for the record.
-        frames: None (or "stored"): frames coded as images; "rendered" (Craftax only): each
-            frame as its residual against a re-render from the stored state, ~1/100 of the
-            bytes for a re-render at decoding (``zoo.data.rerender``). None, not "stored",
-            is kept so manifests written before this field compare equal.
-        expert_options: overrides of the scripted expert's ``ExpertConfig`` fields (e.g.
-            ``{"plants_first": True}``); None: its defaults (and older manifests compare equal).
-    """
-
-    expert: str
-    episodes: int
-    seed: int
-    env: str = "craftax"
-    checkpoint: str | None = None
-    episodes_per_shard: int = 16
-    chunk_length: int = 256
-    max_steps: int = 10_000
-    min_noop_run: int = 20
-    zstd_level: int = 2
-    zstd_window_log: int = 25
-    source: str | None = None
-    learner: str | None = None
-    learner_sha256: str | None = None
-    learner_temperature: float | None = None
-    beta: float | None = None
-    mix: str | None = None
-    round: int | None = None
-    frames: str | None = None
-    expert_options: dict | None = field(default=None, hash=False)  # a dict: keep hash() working
-
-    def __post_init__(self) -> None:
-        if self.expert_options == {}:
-            object.__setattr__(self, "expert_options", None)  # one spelling of "defaults"
-        if self.expert_options is not None and self.expert != "scripted":
-            raise ValueError(
-                f"expert_options apply to the scripted expert only, got expert={self.expert!r}"
-            )
-        if self.frames == "stored":
-            object.__setattr__(self, "frames", None)  # frozen; one spelling in the manifest
-        if self.frames not in (None, "rendered"):
-            raise ValueError(f"frames must be 'stored' or 'rendered', got {self.frames!r}")
-        if self.frames == "rendered" and self.env != "craftax":
-            raise ValueError(
-                f"frames='rendered' needs env='craftax' (its frames are a function of the "
-                f"stored state), got env={self.env!r}; use frames='stored'"
-            )
-        dagger = (self.learner, self.learner_sha256, self.learner_temperature, self.beta, self.mix)
-        if self.source == "dagger" and None in dagger:
-            raise ValueError(
-                "a DAgger dataset needs learner, learner_sha256, learner_temperature, beta, mix"
-            )
-        if self.source not in (None, "dagger"):
-            raise ValueError(f"source must be None or 'dagger', got {self.source!r}")
-        if self.source is None and any(v is not None for v in dagger):
-            raise ValueError("learner, beta and mix apply to source='dagger' only")
-
-    @property
-    def num_shards(self) -> int:
-        return -(-self.episodes // self.episodes_per_shard)
-
-    def shard_episodes(self, index: int) -> range:
-        start = index * self.episodes_per_shard
-        return range(start, min(start + self.episodes_per_shard, self.episodes))
-
-    @property
-    def codec(self) -> FrameCodec:
-        return FrameCodec(self.zstd_level, self.zstd_window_log)
-
-
-class ShardGenerator:
-    """Holds one env batch and one agent (built once per process) and writes shards.
-
-    Args:
-        config: the dataset's generation arguments.
-        num_envs: episodes played at once (does not change the data).
-    """
-
-    def __init__(self, config: GenerationConfig, num_envs: int) -> None:
-        from zoo.agents import make_agent
-        from zoo.envs import make_env
-
-        self.config = config
-        self.num_envs = max(1, min(num_envs, config.episodes_per_shard, config.episodes))
-        if config.source == "dagger":
-            from zoo.data.dagger import make_dagger_agent
-
-            self.agent = make_dagger_agent(
-                self.num_envs, config.expert, config.learner, config.beta, config.mix,
-                config.learner_temperature,
-            )
-        else:
-            self.agent = make_agent(
-                config.expert, self.num_envs, config.checkpoint,
-                expert_options=config.expert_options,
-            )
-        # rendered frames of a state-only expert are drawn once, by the re-render that codes them
-        pixels = config.frames != "rendered" or getattr(self.agent, "needs_pixels", True)
-        self.env = make_env(config.env, self.num_envs, pixels=pixels, max_steps=config.max_steps)
-        self.versions = package_versions()
-        self.renderer = renderer_version() if config.frames == "rendered" else None
-
-    def run(self, index: int, out: Path, progress: ProgressFn | None = None) -> dict:
-        """Play shard ``index``'s episodes, write the shard, return its manifest entry."""
-        cfg = self.config
-        workdir = Path(out) / f".work-{index:06d}-{os.getpid()}"
-        shutil.rmtree(workdir, ignore_errors=True)
-        workdir.mkdir(parents=True)
-        episodes = iter(cfg.shard_episodes(index))
-        summaries: dict[int, dict] = {}
-        meta = {"env": cfg.env, "expert": cfg.expert}
-        if cfg.source is not None:
-            meta["source"] = cfg.source
-        if self.renderer is not None:
-            meta["renderer"] = self.renderer
-        agreed = np.zeros(self.num_envs, np.int64)  # DAgger: learner's action == the label
-        drove = np.zeros(self.num_envs, np.int64)  # DAgger: steps the expert acted
-        recorders: list[EpisodeRecorder | None] = [None] * self.num_envs
-        seeds = np.zeros(self.num_envs, np.int64)
-
-        with ChunkEncoder(max_pending=self.num_envs + 1) as encoder:
-
-            def start(slot: int) -> bool:
-                episode = next(episodes, None)
-                if episode is None:
-                    recorders[slot] = None
-                    return False
-                seeds[slot] = episode_seed(cfg.seed, episode)
-                recorders[slot] = EpisodeRecorder(
-                    episode, int(seeds[slot]), workdir, cfg.chunk_length, meta, encoder, cfg.codec,
-                    rendered=self.renderer is not None,
-                )
-                agreed[slot] = drove[slot] = 0
-                return True
-
-            for slot in range(self.num_envs):
-                start(slot)
-            step = self.env.reset(seeds)
-            self.agent.reset(seeds)
-            self._observe(step, recorders, np.ones(self.num_envs, bool))
-            frames = 0
-            while any(rec is not None for rec in recorders):
-                actions = np.asarray(self.agent.act(step))
-                after = self.env.step(actions)
-                labels, noop = self._labels(actions, step, after)
-                if cfg.source == "dagger":
-                    agreed += self.agent.learner_actions == labels
-                    drove += self.agent.expert_drove
-                restart = np.zeros(self.num_envs, bool)
-                rngs = self._state_rngs(after)
-                for slot, rec in enumerate(recorders):
-                    if rec is None:
-                        continue
-                    rec.act(int(labels[slot]), float(after.reward[slot]), bool(noop[slot]))
-                    rec.observe(_frame(after, slot), index_state(after.state, slot), rngs[slot])
-                    frames += 1
-                    if after.done[slot]:
-                        summaries[rec.episode] = self._summary(rec)
-                        if cfg.source == "dagger":
-                            summaries[rec.episode]["dagger"] = (int(agreed[slot]), int(drove[slot]))
-                        if progress:
-                            progress(1, frames)
-                            frames = 0
-                        restart[slot] = start(slot)
-                step = after
-                if restart.any():
-                    fresh = self.env.reset(seeds, mask=restart)
-                    self.agent.reset(seeds, mask=restart)
-                    done = after.done & ~restart
-                    step = Step(fresh.frames, fresh.state, after.reward, done, fresh.raw)
-                    self._observe(step, recorders, restart)
-                if progress and frames >= 1024:
-                    progress(0, frames)
-                    frames = 0
-            for summary in summaries.values():
-                summary.pop("written").result()  # raises if writing a fragment failed
-        if progress and frames:
-            progress(0, frames)
-        order = sorted(summaries)
-        path = Path(out) / SHARD_PATTERN.format(index=index)
-        sha = assemble_shard([workdir / f"e{e:07d}.tar" for e in order], path)
-        shutil.rmtree(workdir, ignore_errors=True)
-        return self._entry(index, path, sha, [summaries[e] for e in order])
-
-    def _labels(self, actions: np.ndarray, step: Step, after: Step) -> tuple[np.ndarray, np.ndarray]:
-        """The actions to store and their noop flags.
-
-        Expert play stores what was played. DAgger stores the expert's label of each visited
-        state; a step counts as a noop only when the played action had no effect and was the
-        label too, so states where the learner idles keep the expert's way out.
-        """
-        noop = noop_flags(actions, step.state, after.state)
-        if self.config.source != "dagger":
-            return actions, noop
-        labels = self.agent.labels
-        return labels, noop & (labels == actions)
-
-    def _state_rngs(self, step: Step) -> np.ndarray | list[None]:
-        """Per env, Craftax's ``state_rng`` (rendered frames need it), else None. Read now:
-        the env's next call donates the buffers of ``step.raw``."""
-        if self.renderer is None:
-            return [None] * self.num_envs
-        return np.asarray(step.raw.state_rng)
-
-    def _observe(self, step: Step, recorders: list, mask: np.ndarray) -> None:
-        rngs = self._state_rngs(step)
-        for slot in np.flatnonzero(mask):
-            if recorders[slot] is not None:
-                recorders[slot].observe(
-                    _frame(step, slot), index_state(step.state, slot), rngs[slot]
-                )
-
-    def _summary(self, rec: EpisodeRecorder) -> dict:
-        """Finish the episode and keep what the manifest reports about it."""
-        written = rec.finish()
-        noop = np.asarray(rec.noop, bool)
-        actions = np.asarray(rec.actions)
-        counts = noop_counts(
-            noop, noop_runs(noop), actions, self.config.min_noop_run, np.asarray(rec.sleeping)
-        )
-        return {
-            "episode": rec.episode, "seed": rec.seed, "length": len(rec.actions), "noop": counts,
-            "written": written,
-            "achievements": rec.final_state["achievements"].astype(bool),
-            "return": float(np.sum(rec.rewards)),
-        }
-
-    def _entry(self, index: int, path: Path, sha: str, episodes: list[dict]) -> dict:
-        cfg = self.config
-        noop = {k: sum(e["noop"][k] for e in episodes) for k in episodes[0]["noop"]}
-        noop["ratio_before"] = noop["noop_steps"] / max(noop["steps"], 1)
-        noop["ratio_after"] = noop["kept_noop_steps"] / max(noop["kept_steps"], 1)
-        noop["min_run"] = cfg.min_noop_run
-        unlocks = np.sum([e["achievements"] for e in episodes], axis=0)
-        extra = {}
-        if self.renderer is not None:
-            extra["renderer"] = self.renderer
-        if cfg.source == "dagger":
-            steps = sum(e["length"] for e in episodes)
-            extra["dagger"] = {
-                "learner_agreement": sum(e["dagger"][0] for e in episodes) / max(steps, 1),
-                "expert_share": sum(e["dagger"][1] for e in episodes) / max(steps, 1),
-            }
-        return {
-            **extra,
-            "file": path.name,
-            "index": index,
-            "sha256": sha,
-            "bytes": path.stat().st_size,
-            "episodes": len(episodes),
-            "first_episode": episodes[0]["episode"],
-            "episode_seeds": [e["seed"] for e in episodes],
-            "episode_lengths": [e["length"] for e in episodes],
-            "episode_returns": [e["return"] for e in episodes],
-            "steps": sum(e["length"] for e in episodes),
-            "seed": cfg.seed,
-            "expert": cfg.expert,
-            "env": cfg.env,
-            "chunk_length": cfg.chunk_length,
-            "versions": self.versions,
-            "noop": noop,
-            "achievement_unlocks": dict(zip(ACHIEVEMENT_NAMES, map(int, unlocks))),
-        }
-
-
-def _frame(step: Step, slot: int) -> np.ndarray | None:
-    """Env ``slot``'s frame, or None when the env draws none (rendered frames, state-only expert)."""
-    return None if step.frames is None else step.frames[slot]
-
-
-# --- job arrays: folders of shard ranges joined into one dataset -----------------------
-
-
-def merge_datasets(sources: list[str | Path], out: str | Path) -> dict:
-    """Join CrafterPlay folders of one dataset (``generate --shards A:B`` of a job array) into
-    ``out``: the same generation arguments, no shard index twice, every shard's sha256
-    checked. Shards are hard-linked when ``out`` is on the same filesystem, else copied; the
-    sources are left as they were. Returns the merged manifest (``missing`` lists the shard
-    indices no source had yet: rerun their job, then merge again)."""
-    out = Path(out)
-    if not sources:
-        raise ValueError("nothing to merge: give the shard-range folders")
-    manifests = []
-    for src in map(Path, sources):
-        manifest = load_manifest(src)
-        if manifest is None:
-            raise FileNotFoundError(f"{src / 'manifest.json'} not found: not a CrafterPlay folder")
-        manifests.append((src, manifest))
-    config = manifests[0][1]["config"]
-    owner: dict[int, Path] = {}
-    first = manifests[0][0]
-    for src, manifest in manifests:
-        diff = config_diff(config, manifest["config"], f"in {first}", f"in {src}")
-        if diff:
-            raise DatasetMismatchError(f"cannot merge shards of different datasets: {diff}")
-        for entry in manifest["shards"]:
-            if entry["index"] in owner:
-                raise ValueError(
-                    f"shard {entry['index']} is in both {owner[entry['index']]} and {src}: "
-                    "overlapping --shards ranges"
-                )
-            owner[entry["index"]] = src
-            if sha256_file(src / entry["file"]) != entry["sha256"]:
-                raise ValueError(f"{src / entry['file']}: sha256 differs from its manifest")
-    existing = load_manifest(out)
-    if existing is not None:
-        check_same_config(existing, config, out)
-        taken = {e["index"] for e in existing["shards"]} & set(owner)
-        if taken:
-            raise ValueError(f"{out} already holds shards {sorted(taken)}")
-    merged = existing or new_manifest(config)
-    out.mkdir(parents=True, exist_ok=True)
-    for src, manifest in manifests:
-        for entry in manifest["shards"]:
-            target = out / entry["file"]
-            target.unlink(missing_ok=True)
-            try:
-                os.link(src / entry["file"], target)
-            except OSError:
-                shutil.copyfile(src / entry["file"], target)
-            merged["shards"].append(entry)
-    save_manifest(out, merged)
-    have = {e["index"] for e in merged["shards"]}
-    total = GenerationConfig(**config).num_shards
-    return {**merged, "missing": [i for i in range(total) if i not in have]}
-
-
-# --- running many shards -------------------------------------------------------------
-
-
-class WorkerError(RuntimeError):
-    """A worker process raised or died while playing a shard (the message names the shard)."""
-
-
-def _work(config: GenerationConfig, num_envs: int, out: str, conn: Connection) -> None:
-    """A worker process: plays each shard index it receives, sending progress, then the
-    manifest entry or the traceback of what failed. Stops once the parent is gone (its end of
-    the pipe closed)."""
-    generator = None
-    while True:
-        try:
-            index = conn.recv()
-        except EOFError:
-            return
-        try:
-            if generator is None:  # built here, so a failing build is reported with its shard
-                generator = ShardGenerator(config, num_envs)
-            entry = generator.run(index, Path(out), lambda e, f: conn.send(("progress", (e, f))))
-        except BaseException:
-            conn.send(("error", traceback.format_exc()))
-            return
-        conn.send(("done", entry))
 
 
 def _complete_shards(out: Path, manifest: dict) -> list[dict]:
@@ -447,6 +43,7 @@ def generate(
     after_shard: Callable[[dict], None] | None = None,
     generator: ShardGenerator | None = None,
     shards: tuple[int, int] | None = None,
+    build_agent: AgentBuilder | None = None,
 ) -> dict:
     """Write (or finish) the dataset ``config`` in ``out``; returns the final manifest.
 
@@ -454,10 +51,13 @@ def generate(
     reuses an already built env and agent (JAX compiles once) for in-process runs. A worker
     process that raises or dies ends the run with a WorkerError naming its shard.
     ``shards`` (start, stop) writes only shard indices in [start, stop): one task of a job
-    array, its folder joined with the others' by ``merge_datasets``.
+    array, its folder joined with the others' by ``merge_datasets``. ``build_agent`` makes the
+    agent of each process (``zoo.agents.dataset_agent``); not needed with ``generator``.
     """
     if generator is not None and generator.config != config:
         raise ValueError("generator was built for another GenerationConfig")
+    if generator is None and build_agent is None:
+        raise ValueError("pass build_agent (e.g. zoo.agents.dataset_agent) or a generator")
     from tqdm import tqdm
 
     out = Path(out)
@@ -502,85 +102,11 @@ def generate(
     try:
         if workers <= 1 or len(todo) <= 1:
             if generator is None and todo:
-                generator = ShardGenerator(config, num_envs)
+                generator = ShardGenerator(config, num_envs, build_agent)
             for index in todo:
                 record(generator.run(index, out, advance))
         else:
-            _run_pool(config, out, todo, workers, num_envs, advance, record)
+            run_pool(config, out, todo, workers, num_envs, build_agent, advance, record)
     finally:
         bar.close()
     return manifest
-
-
-def _run_pool(
-    config: GenerationConfig,
-    out: Path,
-    todo: list[int],
-    workers: int,
-    num_envs: int,
-    advance: ProgressFn,
-    record: Callable[[dict], None],
-) -> None:
-    """Shards in ``workers`` spawned processes (JAX is not fork-safe), one shard at a time each.
-
-    Every worker has a pipe of its own, so the parent knows which shard each one plays: a
-    worker that raises or dies (killed, out of memory) ends the run with a WorkerError naming
-    that shard, where a multiprocessing.Pool would wait forever for a killed worker's result.
-    Shards finished before are already in the manifest; the other workers are stopped.
-    """
-    ctx = multiprocessing.get_context("spawn")
-    queued = collections.deque(todo)
-    busy: dict[Connection, tuple[int, BaseProcess]] = {}
-    conns: list[Connection] = []
-    procs: list[BaseProcess] = []
-
-    def assign(conn: Connection, proc: BaseProcess) -> None:
-        busy[conn] = (queued.popleft(), proc)
-        conn.send(busy[conn][0])
-
-    try:
-        for _ in range(min(workers, len(queued))):
-            conn, child_end = ctx.Pipe()
-            proc = ctx.Process(
-                target=_work, args=(config, num_envs, str(out), child_end), daemon=True
-            )
-            proc.start()
-            child_end.close()  # the worker holds the only other end: its death reads as EOF
-            conns.append(conn)
-            procs.append(proc)
-            assign(conn, proc)
-        while busy:
-            failures = []
-            for conn in wait(list(busy)):
-                index, proc = busy[conn]
-                try:
-                    kind, payload = conn.recv()
-                except EOFError:
-                    proc.join(timeout=10)
-                    del busy[conn]
-                    failures.append(
-                        f"shard {index}: worker process {proc.pid} died (exit code {proc.exitcode})"
-                    )
-                    continue
-                if kind == "progress":
-                    advance(*payload)
-                elif kind == "error":
-                    del busy[conn]
-                    failures.append(f"shard {index}: worker process {proc.pid} failed:\n{payload}")
-                else:  # "done"
-                    record(payload)
-                    if queued and not failures:
-                        assign(conn, proc)
-                    else:
-                        del busy[conn]
-            if failures:
-                failures.append("finished shards are kept in the manifest")
-                raise WorkerError("\n".join(failures))
-    finally:
-        # idle, or mid-shard after a failure or an interrupt (a rerun redoes that shard);
-        # terminating is also quicker than letting each interpreter shut down
-        for proc in procs:
-            proc.terminate()
-            proc.join()
-        for conn in conns:
-            conn.close()

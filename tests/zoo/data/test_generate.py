@@ -24,15 +24,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from zoo.data.generate import (
-    GenerationConfig,
-    ShardGenerator,
-    WorkerError,
-    episode_seed,
-    generate,
-)
+from zoo.agents import dataset_agent
+from zoo.data.generate import GenerationConfig, ShardGenerator, generate
 from zoo.data.manifest import DatasetMismatchError, load_manifest
+from zoo.data.pool import WorkerError
 from zoo.data.reader import iter_chunks, iter_episodes, list_shards
+from zoo.envs.base import episode_seed
 from zoo.envs.schema import STATE_FIELDS
 
 CRAFTER = GenerationConfig(
@@ -107,13 +104,13 @@ def _poll(found: Callable[[], list], seconds: float, running: Callable[[], bool]
 @pytest.fixture(scope="module")
 def crafter_dataset(tmp_path_factory):
     root = tmp_path_factory.mktemp("crafterplay")
-    generate(CRAFTER, root, num_envs=2, progress=False)
+    generate(CRAFTER, root, num_envs=2, progress=False, build_agent=dataset_agent)
     return root
 
 
 @pytest.fixture(scope="module")
 def craftax_generator():
-    return ShardGenerator(CRAFTAX, num_envs=2)
+    return ShardGenerator(CRAFTAX, 2, dataset_agent)
 
 
 @pytest.fixture(scope="module")
@@ -166,13 +163,13 @@ def test_round_trip_is_bit_exact_against_a_replay(craftax_dataset, craftax_gener
 
 
 def test_same_seed_same_bytes_for_any_num_envs(craftax_dataset, tmp_path):
-    generate(CRAFTAX, tmp_path, num_envs=1, progress=False)
+    generate(CRAFTAX, tmp_path, num_envs=1, progress=False, build_agent=dataset_agent)
     assert _shas(tmp_path) == _shas(craftax_dataset)
 
 
 @pytest.mark.slow
 def test_same_bytes_with_worker_processes(craftax_dataset, tmp_path):
-    generate(CRAFTAX, tmp_path, workers=2, num_envs=2, progress=False)
+    generate(CRAFTAX, tmp_path, workers=2, num_envs=2, progress=False, build_agent=dataset_agent)
     assert _shas(tmp_path) == _shas(craftax_dataset)
 
 
@@ -180,12 +177,12 @@ def test_same_bytes_with_worker_processes(craftax_dataset, tmp_path):
 def three_shards_dataset(tmp_path_factory):
     """The uninterrupted single-process run the worker tests compare against."""
     root = tmp_path_factory.mktemp("crafterplay_three")
-    generate(THREE_SHARDS, root, num_envs=2, progress=False)
+    generate(THREE_SHARDS, root, num_envs=2, progress=False, build_agent=dataset_agent)
     return root
 
 
 def test_same_bytes_with_worker_processes_on_crafter(three_shards_dataset, tmp_path):
-    generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False)
+    generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False, build_agent=dataset_agent)
     _assert_same_dataset(tmp_path, three_shards_dataset)
     assert _finished_episodes(tmp_path) == [0, 1, 2, 3, 4]
 
@@ -218,11 +215,11 @@ def test_resume_after_the_command_is_killed_mid_shard(crafter_dataset, tmp_path)
 def test_a_worker_that_raises_fails_the_run_naming_its_shard(three_shards_dataset, tmp_path):
     (tmp_path / "crafterplay-000002.tar").mkdir()  # shard 2's final rename fails in its worker
     with _deadline(60), pytest.raises(WorkerError, match="shard 2: worker process") as failed:
-        generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False)
+        generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False, build_agent=dataset_agent)
     assert "IsADirectoryError" in str(failed.value)  # the worker's traceback
     _assert_kept_shards_are_intact(tmp_path, three_shards_dataset, failed=2)
     (tmp_path / "crafterplay-000002.tar").rmdir()
-    generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False)
+    generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False, build_agent=dataset_agent)
     _assert_same_dataset(tmp_path, three_shards_dataset)
 
 
@@ -238,11 +235,11 @@ def test_a_killed_worker_fails_the_run_and_a_rerun_finishes_it(three_shards_data
     killer = threading.Thread(target=kill_shard_2_worker, daemon=True)
     killer.start()
     with _deadline(60), pytest.raises(WorkerError) as failed:
-        generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False)
+        generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False, build_agent=dataset_agent)
     killer.join()
     assert f"shard 2: worker process {killed[0]} died (exit code -9)" in str(failed.value)
     _assert_kept_shards_are_intact(tmp_path, three_shards_dataset, failed=2)
-    generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False)
+    generate(THREE_SHARDS, tmp_path, workers=2, num_envs=1, progress=False, build_agent=dataset_agent)
     _assert_same_dataset(tmp_path, three_shards_dataset)
 
 
@@ -270,7 +267,7 @@ def test_damaged_shard_is_regenerated(crafter_dataset, tmp_path):
     first = root / "crafterplay-000000.tar"
     first.write_bytes(first.read_bytes()[:5000])
     unchanged = _shas(root)[1]
-    generate(CRAFTER, root, num_envs=2, progress=False)
+    generate(CRAFTER, root, num_envs=2, progress=False, build_agent=dataset_agent)
     assert _finished_episodes(root) == [0, 1, 2]
     assert _shas(root)[1] == unchanged
 
@@ -279,7 +276,7 @@ def test_other_arguments_into_same_folder_are_refused(crafter_dataset, tmp_path)
     root = tmp_path / "copy"
     shutil.copytree(crafter_dataset, root)
     with pytest.raises(DatasetMismatchError, match="seed: 7 there vs 8 now"):
-        generate(dataclasses.replace(CRAFTER, seed=8), root, progress=False)
+        generate(dataclasses.replace(CRAFTER, seed=8), root, progress=False, build_agent=dataset_agent)
     assert json.loads((root / "manifest.json").read_text())["config"]["seed"] == 7
 
 

@@ -14,6 +14,7 @@ import tarfile
 import numpy as np
 import pytest
 
+from zoo.agents import dataset_agent
 from zoo.cli import main
 from zoo.data import rerender
 from zoo.data.codec import FrameCodec, decode_frames
@@ -33,7 +34,7 @@ RENDERED = dataclasses.replace(STORED, frames="rendered")
 
 @pytest.fixture(scope="module")
 def generator():
-    return ShardGenerator(RENDERED, num_envs=2)
+    return ShardGenerator(RENDERED, 2, dataset_agent)
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +47,7 @@ def rendered_data(tmp_path_factory, generator):
 @pytest.fixture(scope="module")
 def stored_data(tmp_path_factory):
     root = tmp_path_factory.mktemp("stored")
-    generate(STORED, root, num_envs=2, progress=False)
+    generate(STORED, root, num_envs=2, progress=False, build_agent=dataset_agent)
     return root
 
 

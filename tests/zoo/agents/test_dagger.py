@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import torch
 
+from zoo.agents.dagger import DaggerMixture
 from zoo.cli import main
-from zoo.data.dagger import DaggerMixture
 from zoo.data.reader import iter_episodes
 from zoo.envs.base import Step
 from zoo.experts.scripted import ScriptedExpert

@@ -72,18 +72,3 @@ class DaggerMixture:
         else:
             self.expert_drove = self._episode_draw.copy()
         return np.where(self.expert_drove, self.labels, self.learner_actions)
-
-
-def make_dagger_agent(
-    num_envs: int, expert: str, learner: str, beta: float, mix: str, temperature: float
-) -> DaggerMixture:
-    """The mixture of the C-VPT at ``learner`` (a .ckpt or export folder) and a named expert."""
-    from zoo.agents import make_agent
-
-    return DaggerMixture(
-        make_agent("cvpt", num_envs, learner, temperature=temperature),
-        make_agent(expert, num_envs),
-        num_envs,
-        beta,
-        mix,
-    )
