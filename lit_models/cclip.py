@@ -5,7 +5,7 @@ that caption's paraphrases (zoo.captions paraphrases.yaml). AdamW uses MineCLIP'
 decay over both CLIP towers; layers initialised from pretrained CLIP weights also get
 ``pretrained_lr_mult`` while new layers (temporal transformer, adapter, logit scale) train at the
 full lr. Validation and test report video -> text retrieval over groups of 64 held-out clips
-(zoo.eval.retrieval).
+(zoo.eval.retrieval, gathered across DDP ranks by lit_models.retrieval_metric).
 """
 
 from __future__ import annotations
@@ -17,12 +17,12 @@ from pathlib import Path
 import lightning as L
 import torch
 from lightning.pytorch.loggers import WandbLogger
-from lightning.pytorch.utilities import rank_zero_warn
 
+from lit_models.retrieval_metric import GroupedRetrieval
 from lit_models.schedules import WarmupCosine
 from zoo.captions.vocabulary import load_vocabulary
 from zoo.eval.plots import write_gif
-from zoo.eval.retrieval import DEFAULT_TOP_KS, grouped_retrieval_metrics, top_captions
+from zoo.eval.retrieval import top_captions
 from zoo.models.cclip import CCLIPConfig, CCLIPModel
 from zoo.models.contrastive import multi_positive_infonce
 
@@ -97,7 +97,8 @@ class CCLIP(L.LightningModule):
         self.model = CCLIPModel(self.config)
         self._weights_ready = pretrained_path is None
         self._register_caption_variants(num_paraphrases)
-        self._eval_outputs: dict[str, list[torch.Tensor]] = defaultdict(list)
+        self.val_retrieval = GroupedRetrieval(retrieval_group_size, prefix="val/")
+        self.test_retrieval = GroupedRetrieval(retrieval_group_size, prefix="test/")
 
     def _register_caption_variants(self, num_paraphrases: int | None) -> None:
         """Tokenise every caption variant once; row offsets[i] is template caption i itself."""
@@ -157,19 +158,16 @@ class CCLIP(L.LightningModule):
         self.log("train/lr", max(self.lr_schedulers().get_last_lr()), batch_size=batch_size)
         return loss
 
-    def _eval_step(self, batch: dict, stage: str) -> None:
+    def _eval_step(self, batch: dict, stage: str, retrieval: GroupedRetrieval) -> None:
         caption_ids = batch["caption_id"]
         video, text = self(batch["frames"], self.caption_tokens(caption_ids, paraphrase=False))
         loss = multi_positive_infonce(video, text, caption_ids, self.model.logit_scale)
         self.log(f"{stage}/loss", loss, batch_size=len(caption_ids), sync_dist=True)
-        outputs = self._eval_outputs
-        if not outputs["video"]:  # the epoch's first batch: keep a few clips to show
+        if retrieval.update_count == 0:  # the epoch's first batch: keep a few clips to show
             self._examples = (batch["frames"][: self.hparams.example_clips].cpu(),
                               caption_ids[: self.hparams.example_clips].cpu(),
                               video[: self.hparams.example_clips].float().cpu())
-        outputs["video"].append(video.float())
-        outputs["text"].append(text.float())
-        outputs["caption_id"].append(caption_ids)
+        retrieval.update(video, text, caption_ids)
 
     def _log_examples(self, stage: str) -> None:
         """A W&B table: each kept clip (as a video), its caption and C-CLIP's top-3 captions."""
@@ -196,37 +194,24 @@ class CCLIP(L.LightningModule):
                 logger.experiment.log({f"{stage}/examples": table,
                                        "trainer/global_step": self.global_step})
 
-    def _log_retrieval(self, stage: str) -> None:
-        outputs = {key: torch.cat(parts) for key, parts in self._eval_outputs.items()}
-        self._eval_outputs.clear()
+    def _log_retrieval(self, stage: str, retrieval: GroupedRetrieval) -> None:
+        """Log the epoch's retrieval metrics (every rank's clips) and start the next epoch afresh;
+        compute() returns a dict, which Lightning cannot log or reset by itself."""
         self._log_examples(stage)
-        if not outputs:
-            return
-        if self.trainer.world_size > 1:
-            outputs = {key: self.all_gather(value).flatten(0, 1) for key, value in outputs.items()}
-        group_size = self.hparams.retrieval_group_size
-        if len(outputs["caption_id"]) < group_size:
-            rank_zero_warn(
-                f"{stage}: {len(outputs['caption_id'])} held-out clips are fewer than "
-                f"retrieval_group_size={group_size}; retrieval metrics skipped"
-            )
-            return
-        metrics = grouped_retrieval_metrics(
-            outputs["video"], outputs["text"], outputs["caption_id"], group_size, DEFAULT_TOP_KS
-        )
-        self.log_dict({f"{stage}/{key}": value for key, value in metrics.items()}, prog_bar=False)
+        self.log_dict(retrieval.compute())
+        retrieval.reset()
 
     def validation_step(self, batch: dict, batch_idx: int) -> None:
-        self._eval_step(batch, "val")
+        self._eval_step(batch, "val", self.val_retrieval)
 
     def on_validation_epoch_end(self) -> None:
-        self._log_retrieval("val")
+        self._log_retrieval("val", self.val_retrieval)
 
     def test_step(self, batch: dict, batch_idx: int) -> None:
-        self._eval_step(batch, "test")
+        self._eval_step(batch, "test", self.test_retrieval)
 
     def on_test_epoch_end(self) -> None:
-        self._log_retrieval("test")
+        self._log_retrieval("test", self.test_retrieval)
 
     def predict_step(self, batch: dict, batch_idx: int) -> dict[str, torch.Tensor]:
         """Unit-norm video embeddings of the clips with their caption and source step, for

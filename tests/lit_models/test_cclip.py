@@ -160,6 +160,20 @@ def test_fit_validate_and_reload_from_checkpoint(caption_root, tmp_path):
         torch.testing.assert_close(plain.encode_video(clips), module.model.encode_video(clips))
 
 
+def test_checkpoints_without_retrieval_metric_states_still_load(tmp_path):
+    # What CCLIP saved before the retrieval metric existed: the model's weights and nothing else.
+    model = smoke_module().model
+    path = tmp_path / "old.ckpt"
+    torch.save({
+        "pytorch-lightning_version": L.__version__, "hyper_parameters": {"model": "smoke"},
+        "state_dict": {f"model.{k}": v for k, v in model.state_dict().items()},
+    }, path)  # fmt: skip
+    module = CCLIP.load_from_checkpoint(path)
+    # torchmetrics forgives missing metric keys on load; this keeps new checkpoints like old ones
+    assert not [key for key in module.state_dict() if not key.startswith("model.")]
+    torch.testing.assert_close(module.model.state_dict(), model.state_dict())
+
+
 def test_smoke_config_runs_through_the_lightning_cli(caption_root, tmp_path):
     from lit_models.cli import run_lightning_cli
 
