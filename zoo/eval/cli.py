@@ -1,5 +1,6 @@
 """``zoo eval``: play an agent for N episodes and write the Crafter evaluation report, or, with
-``--task``, its success on a task suite (``zoo.envs.tasks``)."""
+``--task``, its success on a task suite (``zoo.envs.tasks``); its subcommands run C-Steve-1's
+results protocol (``zoo.eval.steve_tables``)."""
 
 from __future__ import annotations
 
@@ -10,9 +11,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from zoo.agents import AGENT_NAMES, checkpoint_kind, load_checkpoint_agent, make_agent
-from zoo.argtypes import non_negative_int, positive_int
+from zoo.argtypes import existing_dir, non_negative_int, out_dir, positive_int
 from zoo.envs import ENV_NAMES
-from zoo.envs.tasks import TASKS
+from zoo.envs.tasks import SINGLE_STEP_TASKS, TASKS
+from zoo.eval.steve_tables import STEVE_ROWS, TABLE_ROWS
 
 DESCRIPTION = """\
 Play an agent in Craftax-Classic or original crafter and score it the paper's way: Crafter
@@ -26,7 +28,22 @@ With --task NAME it plays a task instead (docs/tasks.md) and writes OUT/report.j
 OUT/report.md: success rate with a Wilson 95% interval, median steps to success, sub-task
 completion. An instructable agent gets --instruction after every reset, or with --chain the
 heuristic planner's instructions; with neither, each sub-task's own caption in turn.
+
+The subcommands below are C-Steve-1's results protocol (docs/results/csteve1.md): many task
+reports under one OUT and a summary; see `zoo eval task-table --help`.
 """
+USAGE = """\
+%(prog)s --env {craftax,crafter} (--agent NAME | --checkpoint PATH) [options]
+       %(prog)s {task-table,cfg-sweep,goal-check} ... (C-Steve-1's results protocol)"""
+PROTOCOLS = {  # subcommand -> (its summary's mode name, one-line help)
+    "task-table": ("table", (
+        "single-step tasks: random, C-VPT, C-Steve-1 with its instruction and with another task's"
+    )),
+    "cfg-sweep": ("sweep", "C-Steve-1 on the paper's four CFG tasks at several guidance scales"),
+    "goal-check": ("goals", (
+        "without playing: whether the prior's goal for each instruction lands nearest its caption"
+    )),
+}
 
 
 class UsageError(Exception):
@@ -39,6 +56,7 @@ def register(subparsers) -> None:
         "eval",
         help="score an agent: Crafter Score, Return, success rates, GIF",
         description=DESCRIPTION,
+        usage=USAGE,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--agent", choices=AGENT_NAMES, help="who plays (from zoo.agents.AGENT_NAMES)")
@@ -47,7 +65,8 @@ def register(subparsers) -> None:
         help="a trained agent: C-VPT or C-Steve-1 .ckpt/export, PPO expert run, or a "
         "`zoo rl train` run folder (its newest checkpoint) or one of its checkpoints/update_*.pt",
     )
-    p.add_argument("--env", choices=ENV_NAMES, required=True, help="game to play in")
+    # required, but checked by run_eval: the protocols take their own --env (several games)
+    p.add_argument("--env", choices=ENV_NAMES, help="game to play in (required)")
     p.add_argument("--episodes", type=positive_int, default=100, help="episodes (default 100)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="run seed (default 0)")
     p.add_argument(
@@ -94,6 +113,85 @@ def register(subparsers) -> None:
         help="with --task: the heuristic planner chains instructions to the agent",
     )
     p.set_defaults(handler=run_eval)
+    protocols = p.add_subparsers(
+        dest="protocol", metavar="PROTOCOL", prog=p.prog,
+        title="C-Steve-1's results protocol (docs/results/csteve1.md)",
+    )
+    for name, (mode, line) in PROTOCOLS.items():
+        sub = protocols.add_parser(name, help=line, description=_protocol_description(mode, line))
+        sub.add_argument("--out", type=out_dir, required=True, help="folder of all reports")
+        sub.set_defaults(handler=run_protocol)
+        ADD_PROTOCOL_ARGS[name](sub)
+
+
+def _protocol_description(mode: str, line: str) -> str:
+    summary = f"Summary: OUT/summary_{mode}.json"
+    if mode == "goals":
+        return f"{line}. {summary}."
+    return (
+        f"{line}. Each cell is a `zoo eval --task` report at OUT/<env>/<task>/<row>/report.json "
+        "(episode j seeded from (--seed, j), so rows play the same worlds); a rerun reads the "
+        f"cells already reported instead of playing them. {summary} and .md."
+    )
+
+
+def _add_goal_models(p: argparse.ArgumentParser, required: bool) -> None:
+    p.add_argument("--cclip", type=Path, required=required, metavar="CKPT",
+                   help="C-CLIP of C-Steve-1's goals")
+    p.add_argument("--prior", type=Path, required=required, metavar="CKPT",
+                   help="CVAE prior: text -> goal")
+
+
+def _add_play_args(p: argparse.ArgumentParser, steve_required: bool) -> None:
+    """What the played protocols share: the games, episodes and C-Steve-1's checkpoints."""
+    p.add_argument("--csteve1", type=Path, required=steve_required, metavar="CKPT",
+                   help="C-Steve-1 checkpoint or export")
+    _add_goal_models(p, steve_required)
+    p.add_argument("--env", nargs="+", choices=ENV_NAMES, default=list(ENV_NAMES), metavar="GAME",
+                   help=f"games: {', '.join(ENV_NAMES)} (default: both)")
+    p.add_argument("--episodes", type=positive_int, default=100, help="per cell (default 100)")
+    p.add_argument("--seed", type=non_negative_int, default=0,
+                   help="episode j of every cell is seeded from (seed, j) (default 0)")
+    p.add_argument("--num-envs", type=positive_int, default=20,
+                   help="envs played at once (default 20)")
+    p.add_argument("--temperature", type=float, default=1.0,
+                   help="C-VPT and C-Steve-1 sample from softmax(logits / T) (default 1)")
+
+
+def _add_table_args(p: argparse.ArgumentParser) -> None:
+    _add_play_args(p, steve_required=False)
+    p.add_argument("--cvpt", type=Path, metavar="CKPT", help="C-VPT checkpoint (the cvpt row)")
+    p.add_argument("--tasks", nargs="+", choices=SINGLE_STEP_TASKS, metavar="TASK",
+                   default=list(SINGLE_STEP_TASKS),
+                   help=f"single-step tasks (default: all, {', '.join(SINGLE_STEP_TASKS)})")
+    p.add_argument("--rows", nargs="+", choices=TABLE_ROWS, default=list(TABLE_ROWS),
+                   metavar="ROW", help=f"table rows to run (default: all, {', '.join(TABLE_ROWS)}; "
+                   "e.g. the baselines while C-Steve-1 trains)")
+    p.add_argument("--cfg-scale", type=float, default=1.5,
+                   help="C-Steve-1's classifier-free guidance scale (default 1.5)")
+
+
+def _add_sweep_args(p: argparse.ArgumentParser) -> None:
+    _add_play_args(p, steve_required=True)
+    p.add_argument("--cfg-scales", type=float, nargs="+", default=[0, 0.5, 1, 1.5, 2, 3],
+                   help="guidance scales (default 0 0.5 1 1.5 2 3)")
+
+
+def _add_goal_args(p: argparse.ArgumentParser) -> None:
+    _add_goal_models(p, required=True)
+    p.add_argument("--embeddings", type=existing_dir, required=True, metavar="DIR",
+                   help="a `zoo goals embed` folder")
+    p.add_argument("--max-shards", type=positive_int, default=12,
+                   help="shards read (default 12)")
+    p.add_argument("--min-count", type=non_negative_int, default=50,
+                   help="captions with fewer steps have no centroid (default 50)")
+    p.add_argument("--samples", type=positive_int, default=20,
+                   help="prior draws per instruction (default 20)")
+
+
+ADD_PROTOCOL_ARGS = {
+    "task-table": _add_table_args, "cfg-sweep": _add_sweep_args, "goal-check": _add_goal_args,
+}
 
 
 def _check_out(out: Path, overwrite: bool) -> None:
@@ -152,11 +250,13 @@ def run_eval(args: argparse.Namespace) -> int:
 
     num_envs = min(args.num_envs, args.episodes)
     now = datetime.now(UTC)
-    if args.out is None:
-        who = args.agent or "checkpoint"
-        what = args.env if args.task is None else f"{args.task}-{args.env}"
-        args.out = Path("runs", "eval", f"{who}-{what}-{now:%Y%m%d-%H%M%S}")
     try:
+        if args.env is None:
+            raise UsageError("the following arguments are required: --env")
+        if args.out is None:
+            who = args.agent or "checkpoint"
+            what = args.env if args.task is None else f"{args.task}-{args.env}"
+            args.out = Path("runs", "eval", f"{who}-{what}-{now:%Y%m%d-%H%M%S}")
         _check_task_args(args)
         _check_out(args.out, args.overwrite)
         agent = _build_agent(args, num_envs)
@@ -256,3 +356,46 @@ def run_task_eval(args: argparse.Namespace, agent, num_envs: int, now: datetime)
     print(format_task_table(report))
     _announce(args, report)
     return 0
+
+
+def run_protocol(args: argparse.Namespace) -> int:
+    """``zoo eval task-table|cfg-sweep|goal-check``: C-Steve-1's results protocol, written by
+    ``zoo.eval.steve_tables`` under --out with a summary_<mode>.md/.json."""
+    from zoo.eval import steve_tables
+
+    mode = PROTOCOLS[args.protocol][0]
+    try:
+        _check_protocol_args(args)
+        args.out.mkdir(parents=True, exist_ok=True)
+        if mode == "goals":
+            try:
+                rows = steve_tables.goals(args.cclip, args.prior, args.embeddings,
+                                          args.max_shards, args.min_count, args.samples)
+            except FileNotFoundError as err:  # a folder without shards
+                raise UsageError(f"--embeddings: {err}") from None
+        else:
+            setting = steve_tables.Setting(
+                args.out, tuple(args.env), args.episodes, args.seed, args.num_envs,
+                args.temperature, args.csteve1, args.cclip, args.prior,
+            )
+            rows = (steve_tables.table(setting, args.tasks, args.rows, args.cvpt, args.cfg_scale)
+                    if mode == "table" else steve_tables.sweep(setting, args.cfg_scales))
+    except UsageError as err:
+        print(f"zoo eval {args.protocol}: error: {err}", file=sys.stderr)
+        return 2
+    written = steve_tables.write_summary(args.out, mode, rows)
+    print(f"wrote {', '.join(str(path) for path in written)}")
+    return 0
+
+
+def _check_protocol_args(args: argparse.Namespace) -> None:
+    for flag in ("cvpt", "csteve1", "cclip", "prior"):
+        path = getattr(args, flag, None)  # goal-check has no --cvpt or --csteve1
+        if path is not None and not path.exists():
+            raise UsageError(f"--{flag} {path} does not exist")
+    if args.protocol != "task-table":
+        return  # the other two require their checkpoints in the parser
+    if "cvpt" in args.rows and args.cvpt is None:
+        raise UsageError("the cvpt row needs --cvpt (the unconditioned baseline)")
+    if set(STEVE_ROWS) & set(args.rows) and None in (args.csteve1, args.cclip, args.prior):
+        raise UsageError("C-Steve-1 rows need --csteve1, --cclip and --prior")
