@@ -35,6 +35,7 @@ import torch
 from datamodules.crafterplay import CrafterPlayDataModule
 from lit_models.cvpt import CVPT
 from zoo.agents.cvpt_agent import CVPTPolicy
+from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 
 RESULTS = Path(__file__).parent / "results" / "cvpt.json"
@@ -129,7 +130,7 @@ def training_throughput(
 
 def cached_vs_recompute(steps: int, num_envs: int) -> dict:
     torch.manual_seed(0)
-    model = CVPTModel(CVPTConfig.from_name("tiny")).eval()
+    model = CVPTModel(CVPTConfig.from_name("tiny", NUM_ACTIONS)).eval()
     policy = CVPTPolicy(model)
     memory = model.config.memory_len
     frames = np.random.default_rng(0).integers(0, 256, (steps, num_envs, 144, 144, 3), dtype=np.uint8)
@@ -165,7 +166,7 @@ def preset_memory(name: str, seq_len: int) -> dict:
     sequence of ``seq_len`` 144-px frames, above the imports' own footprint."""
     Path("/proc/self/clear_refs").write_text("5")  # reset VmHWM to the current RSS
     base = _proc_status_mib("VmRSS")
-    model = CVPTModel(CVPTConfig.from_name(name))
+    model = CVPTModel(CVPTConfig.from_name(name, NUM_ACTIONS))
     built = _proc_status_mib("VmRSS")
     optimizer = torch.optim.AdamW(model.parameters(), lr=1e-4)
     frames = torch.randint(0, 256, (1, seq_len, 144, 144, 3), dtype=torch.uint8)

@@ -30,6 +30,7 @@ import torch
 
 from zoo.agents.cvpt_agent import CVPTPolicy
 from zoo.agents.steve_agent import StevePolicy
+from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.models.steve import SteveConfig, SteveModel
 
@@ -47,12 +48,12 @@ def _median_seconds(fn, repeats: int, warmup: int = 3) -> float:
     return statistics.median(times)
 
 
-VPT_HEAD_HIDDEN = 256  # the VPT-head C-VPT of docs/results.md
+VPT_HEAD_HIDDEN = 256  # the VPT-head C-VPT of docs/results/cvpt.md
 
 
 def _backbone(seed: int = 0, head_hidden: int = 0) -> CVPTModel:
     torch.manual_seed(seed)
-    return CVPTModel(CVPTConfig.from_name("tiny", input_downsample=2, head_hidden=head_hidden))
+    return CVPTModel(CVPTConfig.from_name("tiny", NUM_ACTIONS, input_downsample=2, head_hidden=head_hidden))
 
 
 def acting(num_envs: int, repeats: int) -> dict:

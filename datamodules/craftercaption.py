@@ -31,6 +31,7 @@ from zoo.captions.dataset import (
     load_caption_manifest,
 )
 from zoo.captions.vocabulary import load_vocabulary
+from zoo.data.manifest import MissingDatasetError
 from zoo.data.storage import join, tar_samples
 
 
@@ -96,7 +97,7 @@ class CrafterCaptionDataModule(L.LightningDataModule):
         urls = list_caption_shards(self.hparams.root, split)
         if not urls:
             where = join(self.hparams.root, "manifest.json")
-            raise FileNotFoundError(f"{where} lists no {split!r} shards")
+            raise MissingDatasetError(f"{where} lists no {split!r} shards")
         return urls
 
     def dataset(self, split: str, train: bool, first_epoch: int = 0) -> EpochSeededStream:

@@ -23,6 +23,7 @@ from lightning.pytorch.cli import LightningCLI, SaveConfigCallback
 from lightning.pytorch.loggers import WandbLogger
 
 from lit_models.prediction_writer import NpzPredictionWriter
+from zoo.data.manifest import MissingDatasetError
 from zoo.data.storage import is_url
 
 
@@ -208,9 +209,9 @@ def run_lightning_cli(argv: list[str]) -> LightningCLI:
             with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
                 wandb.finish(exit_code=1)
         _remove_failed_run_dirs(_RUN_DIRS_GIVEN - given_before)
-        if isinstance(err, FileNotFoundError) and "manifest.json" in str(err):
+        if isinstance(err, MissingDatasetError):
             raise DataNotFoundError(
-                f"{err} (make it with `zoo data generate`, or point data.init_args.root at one)"
+                f"{err}; or point data.init_args at an existing folder"
             ) from err
         raise
     for logger in cli.trainer.loggers:

@@ -10,6 +10,7 @@ import torch
 
 from lit_models.cli import run_lightning_cli
 from zoo.cli import main
+from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.models.prior import CVAEPrior, PriorConfig
 from zoo.weights.export import save_exported
@@ -20,7 +21,7 @@ CONFIG = Path(__file__).resolve().parents[1] / "configs" / "csteve1_cpu.yaml"
 def _tiny_backbone(root: Path) -> Path:
     torch.manual_seed(0)
     config = CVPTConfig.from_name(
-        "tiny", d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(2, 4, 4),
+        "tiny", NUM_ACTIONS, d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(2, 4, 4),
         encoder_hidden=32, memory_len=4, input_downsample=4,
     )
     return save_exported(CVPTModel(config), root / "cvpt")

@@ -24,7 +24,7 @@ TOP_LEVEL = (
     ("zoo.captions.cli", "register"),
     ("zoo.experts.cli", "register"),
     ("zoo.weights.cli", "register"),
-    ("zoo.demo", "register"),
+    ("zoo.pipeline.demo", "register"),
     ("zoo.eval.play", "register"),
     ("zoo.rl.cli", "register"),
     ("zoo.pipeline", "register"),

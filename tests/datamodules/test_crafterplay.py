@@ -19,6 +19,7 @@ from datamodules.crafterplay import CrafterPlayDataModule, episode_split
 from datamodules.seeded_shuffle import seeded_loader
 from zoo.agents import dataset_agent
 from zoo.data.generate import GenerationConfig, generate
+from zoo.data.manifest import MissingDatasetError
 from zoo.data.reader import CorruptShardError, filter_noops, iter_chunks, list_shards
 
 NUM_EPISODES = 8
@@ -140,7 +141,7 @@ def test_with_epoch_fixes_the_epoch_length(crafterplay: Path) -> None:
 def test_bad_fractions_and_missing_data_are_clear_errors(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="val_fraction=0.5 and test_fraction=0.5"):
         CrafterPlayDataModule(str(tmp_path), val_fraction=0.5, test_fraction=0.5)
-    with pytest.raises(FileNotFoundError, match="manifest.json"):
+    with pytest.raises(MissingDatasetError, match="manifest.json"):  # zoo fit: one line
         _module(tmp_path).dataset("train")
 
 

@@ -119,7 +119,10 @@ def test_a_missing_manifest_url_is_a_one_line_error_naming_it(served) -> None:
     _, url = served
     with pytest.raises(FileNotFoundError) as err:
         _ = _play(url + "nowhere/").shards
-    assert str(err.value) == f"{url}nowhere/manifest.json not found: not a CrafterPlay folder"
+    assert str(err.value) == (
+        f"{url}nowhere/manifest.json not found: not a CrafterPlay folder (make it with"
+        " `zoo data generate`)"
+    )
 
 
 def test_unknown_or_uninstalled_protocols_are_named() -> None:

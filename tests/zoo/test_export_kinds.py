@@ -18,6 +18,7 @@ from torch import nn
 
 from zoo.agents import checkpoint_kind
 from zoo.cli import main as zoo_main
+from zoo.envs.constants import NUM_ACTIONS
 from zoo.files import sha256_file
 from zoo.models.cclip import build_cclip
 from zoo.models.cvpt import CVPTConfig, CVPTModel
@@ -60,7 +61,8 @@ def _cvpt() -> tuple[nn.Module, dict]:
         "impala_channels": list(CVPT_SIZES["impala_channels"]),
         "head_hidden": 8,
     }
-    return CVPTModel(CVPTConfig.from_name("tiny", **CVPT_SIZES, head_hidden=8)), hparams
+    config = CVPTConfig.from_name("tiny", NUM_ACTIONS, **CVPT_SIZES, head_hidden=8)
+    return CVPTModel(config), hparams
 
 
 def _cclip() -> tuple[nn.Module, dict]:
@@ -81,7 +83,7 @@ def _prior() -> tuple[nn.Module, dict]:
 
 
 def _steve() -> tuple[nn.Module, dict]:
-    backbone = CVPTModel(CVPTConfig.from_name("tiny", **CVPT_SIZES))
+    backbone = CVPTModel(CVPTConfig.from_name("tiny", NUM_ACTIONS, **CVPT_SIZES))
     config = SteveConfig(goal_dim=16, lora_rank=2, lora_targets=["query", "ff.0"], head_hidden=8)
     hparams = {
         "_class_path": "lit_models.csteve1.CSteve1",

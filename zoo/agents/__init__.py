@@ -120,18 +120,20 @@ def make_agent(
 
 
 def dataset_agent(config, num_envs: int) -> Agent:
-    """The agent that plays a CrafterPlay dataset's episodes (``zoo.data.GenerationConfig``):
-    its expert, or for a DAgger dataset the learner/expert mixture. What ``zoo data generate``
-    and ``zoo data dagger`` pass to ``zoo.data.generate.generate`` as ``build_agent``."""
-    if config.source == "dagger":  # the C-VPT learner (.ckpt or export folder) and the expert
-        from zoo.agents.dagger import DaggerMixture
+    """The agent that plays the episodes of a CrafterPlay dataset
+    (``zoo.data.generate.GenerationConfig``): its expert, or with ``dagger`` settings the
+    learner/expert mixture. What ``zoo data generate`` and ``zoo data dagger`` pass to
+    ``zoo.data.generate.generate`` as ``build_agent``."""
+    expert = make_agent(config.expert, num_envs, config.checkpoint,
+                        expert_options=config.expert_options)
+    dagger = config.dagger
+    if dagger is None:
+        return expert
+    from zoo.agents.dagger import DaggerMixture
 
-        learner = make_agent("cvpt", num_envs, config.learner,
-                             temperature=config.learner_temperature)
-        expert = make_agent(config.expert, num_envs)
-        return DaggerMixture(learner, expert, num_envs, config.beta, config.mix)
-    return make_agent(config.expert, num_envs, config.checkpoint,
-                      expert_options=config.expert_options)
+    # the C-VPT learner: a .ckpt or an export folder
+    learner = make_agent("cvpt", num_envs, dagger.learner, temperature=dagger.learner_temperature)
+    return DaggerMixture(learner, expert, num_envs, dagger.beta, dagger.mix)
 
 
 def is_rl_run(path: Path) -> bool:

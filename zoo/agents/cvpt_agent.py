@@ -10,21 +10,9 @@ import torch
 from zoo.agents.base import EpisodeStreams
 from zoo.envs.base import Step
 from zoo.models.cvpt import CVPTModel
+from zoo.models.sampling import sample_actions
 from zoo.models.trxl import TrXLState
 from zoo.weights import load_model
-
-
-def sample_actions(
-    logits: torch.Tensor, temperature: float, greedy: bool, uniforms: np.ndarray
-) -> np.ndarray:
-    """One action per row of (N, A) logits: argmax if ``greedy``, else inverse-CDF sampling of
-    softmax(logits / temperature) driven by ``uniforms`` (N,) in [0, 1)."""
-    if greedy:
-        return logits.argmax(-1).cpu().numpy()
-    probs = torch.softmax(logits.float() / temperature, dim=-1).double().cpu().numpy()
-    cdf = np.cumsum(probs, axis=-1)
-    actions = (np.asarray(uniforms)[:, None] * cdf[:, -1:] >= cdf).sum(-1)
-    return np.minimum(actions, probs.shape[-1] - 1)
 
 
 class CVPTPolicy:

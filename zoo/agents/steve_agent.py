@@ -21,7 +21,7 @@ import torch
 from torch.nn import functional as F
 
 from zoo.agents.base import EpisodeStreams
-from zoo.agents.cvpt_agent import sample_actions
+from zoo.models.sampling import sample_actions
 from zoo.envs.base import Step
 from zoo.models.cclip import CCLIPModel
 from zoo.models.prior import CVAEPrior

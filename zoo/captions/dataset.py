@@ -40,6 +40,7 @@ from zoo.captions.balance import (
 )
 from zoo.captions.rules import CATEGORIES, EpisodeView, RuleParams, all_rules, scan_episode
 from zoo.captions.vocabulary import Caption, Vocabulary, load_vocabulary
+from zoo.data.manifest import MissingDatasetError
 from zoo.data.storage import join, read_bytes
 from zoo.files import atomic_path, atomic_write_text, sha256_file
 
@@ -185,7 +186,7 @@ def load_caption_manifest(root: str | Path) -> dict:
     try:
         return json.loads(read_bytes(path))
     except FileNotFoundError:
-        raise FileNotFoundError(
+        raise MissingDatasetError(
             f"{path} does not exist; write the data with `zoo data caption`"
         ) from None
 

@@ -63,7 +63,7 @@ def register(subparsers) -> None:
         "dagger",
         help="DAgger rollouts: a C-VPT plays, the scripted expert labels every state",
         description="Write CrafterPlay shards whose actions are the expert's labels of the "
-        "states the learner reached (manifest: source dagger, round, learner sha256, beta). "
+        "states the learner reached (manifest: config.dagger with round, learner sha256, beta). "
         "Resumable and deterministic like `zoo data generate`; train on them together with "
         "the expert data through the datamodule's `sources`. See docs/dagger.md.",
     )
@@ -160,6 +160,7 @@ def _dagger(args) -> int:
     import os
 
     from zoo.data.generate import GenerationConfig
+    from zoo.data.shard_generator import DaggerSettings
     from zoo.weights.export import checkpoint_sha256
 
     learner = Path(args.checkpoint)
@@ -173,9 +174,11 @@ def _dagger(args) -> int:
     config = GenerationConfig(
         expert=args.expert, episodes=args.episodes, seed=args.seed, env=args.env,
         episodes_per_shard=args.episodes_per_shard, chunk_length=args.chunk_length,
-        max_steps=args.max_steps, source="dagger", learner=str(learner.resolve()),
-        learner_sha256=checkpoint_sha256(learner), learner_temperature=args.temperature,
-        beta=args.beta, mix=args.mix, round=args.round, frames=args.frames,
+        max_steps=args.max_steps, frames=args.frames,
+        dagger=DaggerSettings(
+            learner=str(learner.resolve()), learner_sha256=checkpoint_sha256(learner),
+            learner_temperature=args.temperature, beta=args.beta, mix=args.mix, round=args.round,
+        ),
     )
     if args.workers > 1:  # each spawned worker runs the learner: share the cores, not oversubscribe
         os.environ.setdefault("OMP_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // args.workers)))
@@ -205,7 +208,7 @@ def _run_generation(config, args, command: str) -> int:
     shards = len(manifest["shards"])
     episodes = sum(e["episodes"] for e in manifest["shards"])
     print(f"{args.out}: {shards} of {config.num_shards} shards, {episodes} episodes, {steps} steps")
-    if config.source == "dagger":
+    if config.dagger is not None:
         agreement = sum(e["dagger"]["learner_agreement"] * e["steps"] for e in manifest["shards"])
         print(f"learner agreed with the expert's label on {agreement / max(steps, 1):.1%} of steps")
     return 0

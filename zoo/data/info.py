@@ -104,8 +104,14 @@ def format_info(info: dict) -> str:
         f"{info['compression_ratio_frames']:.1f}x smaller than raw {RAW_FRAME_BYTES:,} B)",
         f"noop ratio {info['noop_ratio_before']:.1%} before, {info['noop_ratio_after']:.1%} after "
         f"filtering runs < {info['noop_min_run']}",
-        "achievement unlock rates:",
     ]
+    if dagger := cfg.get("dagger"):
+        lines.append(
+            f"DAgger round {dagger['round']}: learner {dagger['learner']} (sha256 "
+            f"{dagger['learner_sha256'][:12]}..., temperature {dagger['learner_temperature']}), "
+            f"expert acts with beta {dagger['beta']} per {dagger['mix']}"
+        )
+    lines.append("achievement unlock rates:")
     rates = info["achievement_unlock_rates"]
     lines += [f"  {name:20s} {rate:6.1%}" for name, rate in rates.items()]
     for bad in info["bad_shards"]:

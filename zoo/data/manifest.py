@@ -19,6 +19,9 @@ MANIFEST = "manifest.json"
 FORMAT = "crafterplay"
 FORMAT_VERSION = 1
 VERSIONED_PACKAGES = ("crafter-zoo", "crafter", "craftax", "jax", "numpy", "zstandard")
+FLAT_DAGGER_KEYS = ("learner", "learner_sha256", "learner_temperature", "beta", "mix", "round")
+"""The DAgger settings that manifests written before ``GenerationConfig.dagger`` held flat in
+``config``, beside ``source`` ("dagger" or None)."""
 
 
 class DatasetMismatchError(RuntimeError):
@@ -40,6 +43,11 @@ def new_manifest(config: dict) -> dict:
     return {"format": FORMAT, "format_version": FORMAT_VERSION, "config": config, "shards": []}
 
 
+class MissingDatasetError(FileNotFoundError):
+    """A data folder without the data asked for (no manifest.json, or none of a split's
+    shards): a user's error, so ``zoo fit`` reports it in one line, not as a traceback."""
+
+
 def load_manifest(root: str | Path) -> dict | None:
     """The manifest of ``root`` (a folder or folder URL, ``zoo.data.storage``), or None when
     there is none yet."""
@@ -59,7 +67,32 @@ def load_manifest(root: str | Path) -> dict | None:
             f"{path}: CrafterPlay format version {manifest.get('format_version')!r}, this zoo "
             f"reads version {FORMAT_VERSION}; regenerate the data with this version"
         )
+    if "config" in manifest:
+        manifest["config"] = nest_dagger(manifest["config"])
     return manifest
+
+
+def require_manifest(root: str | Path) -> dict:
+    """The manifest of a CrafterPlay folder (or folder URL); MissingDatasetError if it has none."""
+    manifest = load_manifest(root)
+    if manifest is None:
+        raise MissingDatasetError(
+            f"{join(root, MANIFEST)} not found: not a CrafterPlay folder (make it with"
+            " `zoo data generate`)"
+        )
+    return manifest
+
+
+def nest_dagger(config: dict) -> dict:
+    """``config`` in the form this zoo writes: an older manifest's flat DAgger fields (and
+    ``source``) become the nested ``dagger`` settings, or ``dagger: None`` for expert play,
+    so old folders still resume, merge and compare with ``asdict(GenerationConfig)``."""
+    if "source" not in config:
+        return config
+    config = dict(config)
+    flat = {key: config.pop(key, None) for key in FLAT_DAGGER_KEYS}
+    config["dagger"] = flat if config.pop("source") == "dagger" else None
+    return config
 
 
 def save_manifest(root: str | Path, manifest: dict) -> None:
@@ -69,14 +102,20 @@ def save_manifest(root: str | Path, manifest: dict) -> None:
     atomic_write_text(path, json.dumps(manifest, indent=1, sort_keys=True) + "\n")
 
 
-def config_diff(stored: dict, config: dict, here: str = "there", there: str = "now") -> str:
+def config_diff(
+    stored: dict, config: dict, here: str = "there", there: str = "now", prefix: str = ""
+) -> str:
     """The generation arguments that differ, as "key: a here vs b there, ..." ("" if none);
-    a key one side lacks counts as None (fields added later keep old manifests equal)."""
-    keys = sorted(set(stored) | set(config))
-    return ", ".join(
-        f"{k}: {stored.get(k)!r} {here} vs {config.get(k)!r} {there}"
-        for k in keys if stored.get(k) != config.get(k)
-    )
+    a key one side lacks counts as None (fields added later keep old manifests equal). Nested
+    settings both sides have are compared key by key ("dagger.beta: ...")."""
+    diffs = []
+    for key in sorted(set(stored) | set(config)):
+        ours, theirs = stored.get(key), config.get(key)
+        if isinstance(ours, dict) and isinstance(theirs, dict):
+            diffs.append(config_diff(ours, theirs, here, there, f"{prefix}{key}."))
+        elif ours != theirs:
+            diffs.append(f"{prefix}{key}: {ours!r} {here} vs {theirs!r} {there}")
+    return ", ".join(d for d in diffs if d)
 
 
 def check_same_config(manifest: dict, config: dict, root: str | Path) -> None:

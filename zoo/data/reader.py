@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from zoo.data.codec import decode_arrays, decode_frames
-from zoo.data.manifest import MANIFEST, load_manifest
+from zoo.data.manifest import require_manifest
 from zoo.data.noop import filter_noops
 from zoo.data.rerender import decode_rendered
 from zoo.data.shards import FRAMES, META, RENDER, RESIDUAL, STATE, STEPS
@@ -47,10 +47,7 @@ class ReadStats:
 
 def list_shards(root: str | Path) -> list[str]:
     """Shard paths of a CrafterPlay folder, in index order, from its manifest."""
-    manifest = load_manifest(root)
-    if manifest is None:
-        raise FileNotFoundError(f"{join(root, MANIFEST)} not found: not a CrafterPlay folder")
-    return [join(root, entry["file"]) for entry in manifest["shards"]]
+    return [join(root, entry["file"]) for entry in require_manifest(root)["shards"]]
 
 
 def _where(sample: dict) -> str:

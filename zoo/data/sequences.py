@@ -16,7 +16,7 @@ import numpy as np
 import torch
 from torch.utils.data import IterableDataset
 
-from zoo.data.manifest import MANIFEST, load_manifest
+from zoo.data.manifest import require_manifest
 from zoo.data.reader import CorruptShardError, ReadStats, filter_noops, iter_chunks
 from zoo.data.storage import join
 
@@ -43,12 +43,7 @@ class ShardSources(IterableDataset):
             raise ValueError(f"{len(roots)} CrafterPlay folders but {len(weights)} weights")
         self.sources = []
         for source, (root, weight) in enumerate(zip(roots, weights)):
-            manifest = load_manifest(root)
-            if manifest is None:
-                raise FileNotFoundError(
-                    f"{join(root, MANIFEST)} not found: not a CrafterPlay folder"
-                )
-            entries = sorted(manifest["shards"], key=lambda e: e["index"])
+            entries = sorted(require_manifest(root)["shards"], key=lambda e: e["index"])
             total = max(1, sum(int(e["steps"]) for e in entries))
             self.sources += [
                 {

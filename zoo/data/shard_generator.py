@@ -32,6 +32,38 @@ function, so spawned workers can receive it; ``zoo.agents.dataset_agent``)."""
 
 
 @dataclass(frozen=True)
+class DaggerSettings:
+    """A DAgger dataset's rollouts (``zoo data dagger``): the learner plays, the expert labels
+    every state it reaches. Stored nested in the manifest's ``config`` as ``dagger``.
+
+    Args:
+        learner: the C-VPT (.ckpt or export folder) that plays.
+        learner_sha256: the learner's fingerprint (``zoo.weights.export.checkpoint_sha256``),
+            so other weights at the same path make another dataset.
+        learner_temperature: the learner's sampling temperature.
+        beta: probability that the expert acts instead of the learner.
+        mix: "episode" or "step", what one beta draw decides.
+        round: the round number, for the record.
+    """
+
+    learner: str
+    learner_sha256: str
+    learner_temperature: float
+    beta: float
+    mix: str
+    round: int | None = None
+
+    def __post_init__(self) -> None:
+        # None can come from an old manifest's flat fields (``zoo.data.manifest.nest_dagger``);
+        # the values' ranges are checked by the agents that play them (``DaggerMixture``)
+        if None in (self.learner, self.learner_sha256, self.learner_temperature, self.beta,
+                    self.mix):
+            raise ValueError(
+                "a DAgger dataset needs learner, learner_sha256, learner_temperature, beta, mix"
+            )
+
+
+@dataclass(frozen=True)
 class GenerationConfig:
     """Everything that decides a dataset's content (stored in the manifest as ``config``).
 
@@ -47,19 +79,14 @@ class GenerationConfig:
         min_noop_run: filter threshold used for the noop statistics in the manifest.
         zstd_level: zstd level for frames and arrays.
         zstd_window_log: zstd window (log2 bytes).
-        source: "dagger" for DAgger rollouts (``zoo data dagger``); None: the expert plays.
-        learner: DAgger: the C-VPT (.ckpt or export folder) that plays; the expert labels.
-        learner_sha256: DAgger: the learner's fingerprint (``zoo.weights.export.checkpoint_sha256``).
-        learner_temperature: DAgger: the learner's sampling temperature.
-        beta: DAgger: probability that the expert acts instead of the learner.
-        mix: DAgger: "episode" or "step", what one beta draw decides.
-        round: DAgger: the round number, for the record.
         frames: None (or "stored"): frames coded as images; "rendered" (Craftax only): each
             frame as its residual against a re-render from the stored state, ~1/100 of the
             bytes for a re-render at decoding (``zoo.data.rerender``). None, not "stored",
             is kept so manifests written before this field compare equal.
         expert_options: overrides of the scripted expert's ``ExpertConfig`` fields (e.g.
             ``{"plants_first": True}``); None: its defaults (and older manifests compare equal).
+        dagger: DAgger rollouts, the expert labelling a learner's play; None: the expert plays.
+            A dict (as read back from a manifest) becomes ``DaggerSettings``.
     """
 
     expert: str
@@ -73,15 +100,9 @@ class GenerationConfig:
     min_noop_run: int = 20
     zstd_level: int = 2
     zstd_window_log: int = 25
-    source: str | None = None
-    learner: str | None = None
-    learner_sha256: str | None = None
-    learner_temperature: float | None = None
-    beta: float | None = None
-    mix: str | None = None
-    round: int | None = None
     frames: str | None = None
     expert_options: dict | None = field(default=None, hash=False)  # a dict: keep hash() working
+    dagger: DaggerSettings | None = None
 
     def __post_init__(self) -> None:
         if self.expert_options == {}:
@@ -99,15 +120,8 @@ class GenerationConfig:
                 f"frames='rendered' needs env='craftax' (its frames are a function of the "
                 f"stored state), got env={self.env!r}; use frames='stored'"
             )
-        dagger = (self.learner, self.learner_sha256, self.learner_temperature, self.beta, self.mix)
-        if self.source == "dagger" and None in dagger:
-            raise ValueError(
-                "a DAgger dataset needs learner, learner_sha256, learner_temperature, beta, mix"
-            )
-        if self.source not in (None, "dagger"):
-            raise ValueError(f"source must be None or 'dagger', got {self.source!r}")
-        if self.source is None and any(v is not None for v in dagger):
-            raise ValueError("learner, beta and mix apply to source='dagger' only")
+        if isinstance(self.dagger, dict):
+            object.__setattr__(self, "dagger", DaggerSettings(**self.dagger))
 
     @property
     def num_shards(self) -> int:
@@ -152,8 +166,8 @@ class ShardGenerator:
         episodes = iter(cfg.shard_episodes(index))
         summaries: dict[int, dict] = {}
         meta = {"env": cfg.env, "expert": cfg.expert}
-        if cfg.source is not None:
-            meta["source"] = cfg.source
+        if cfg.dagger is not None:
+            meta["source"] = "dagger"  # in every sample's meta.json: part of the shard bytes
         if self.renderer is not None:
             meta["renderer"] = self.renderer
         agreed = np.zeros(self.num_envs, np.int64)  # DAgger: learner's action == the label
@@ -186,7 +200,7 @@ class ShardGenerator:
                 actions = np.asarray(self.agent.act(step))
                 after = self.env.step(actions)
                 labels, noop = self._labels(actions, step, after)
-                if cfg.source == "dagger":
+                if cfg.dagger is not None:
                     agreed += self.agent.learner_actions == labels
                     drove += self.agent.expert_drove
                 restart = np.zeros(self.num_envs, bool)
@@ -199,7 +213,7 @@ class ShardGenerator:
                     frames += 1
                     if after.done[slot]:
                         summaries[rec.episode] = self._summary(rec)
-                        if cfg.source == "dagger":
+                        if cfg.dagger is not None:
                             summaries[rec.episode]["dagger"] = (int(agreed[slot]), int(drove[slot]))
                         if progress:
                             progress(1, frames)
@@ -233,7 +247,7 @@ class ShardGenerator:
         label too, so states where the learner idles keep the expert's way out.
         """
         noop = noop_flags(actions, step.state, after.state)
-        if self.config.source != "dagger":
+        if self.config.dagger is None:
             return actions, noop
         labels = self.agent.labels
         return labels, noop & (labels == actions)
@@ -278,7 +292,7 @@ class ShardGenerator:
         extra = {}
         if self.renderer is not None:
             extra["renderer"] = self.renderer
-        if cfg.source == "dagger":
+        if cfg.dagger is not None:
             steps = sum(e["length"] for e in episodes)
             extra["dagger"] = {
                 "learner_agreement": sum(e["dagger"][0] for e in episodes) / max(steps, 1),

@@ -25,7 +25,7 @@ import numpy as np
 from zoo.captions.rules import EpisodeView, RuleParams, all_rules, scan_episode
 from zoo.captions.vocabulary import Vocabulary
 from zoo.data.manifest import MANIFEST
-from zoo.data.manifest import load_manifest as load_play_manifest
+from zoo.data.manifest import MissingDatasetError, require_manifest
 from zoo.data.storage import join, sha256_of
 
 FORMAT = "crafter-zoo-goal-embeddings"
@@ -96,7 +96,7 @@ def load_embedding_manifest(root: str | Path) -> dict:
     """The manifest of an embedding folder; FileNotFoundError/ValueError name the file."""
     path = Path(root) / MANIFEST
     if not path.is_file():
-        raise FileNotFoundError(f"{path} not found: not a goal-embedding folder (zoo goals embed)")
+        raise MissingDatasetError(f"{path} not found: not a goal-embedding folder (zoo goals embed)")
     try:
         manifest = json.loads(path.read_text())
     except json.JSONDecodeError as err:
@@ -161,9 +161,7 @@ def check_embeddings_match(
     manifest and covers all of its shards (some of them, with ``allow_partial``)."""
     embed = load_embedding_manifest(embed_root)
     play_path = join(play_root, MANIFEST)  # the CrafterPlay folder may be a URL
-    play = load_play_manifest(play_root)
-    if play is None:
-        raise FileNotFoundError(f"{play_path} not found: not a CrafterPlay folder")
+    play = require_manifest(play_root)
     play_sha = sha256_of(play_path)
     made_from = embed["source"]["manifest_sha256"]
     if made_from != play_sha:

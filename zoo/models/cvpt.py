@@ -9,14 +9,14 @@ from typing import Any
 import torch
 from torch import nn
 
-from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.impala import ImpalaEncoder
 from zoo.models.trxl import TransformerXL, TrXLState
 
 
-@dataclass
+@dataclass(kw_only=True)
 class CVPTConfig:
-    """Sizes of a C-VPT policy. Presets ``tiny``/``base``/``large`` follow the paper's table."""
+    """Sizes of a C-VPT policy. Presets ``tiny``/``base``/``large`` follow the paper's table;
+    the action count is the game's, so whoever builds the model gives it."""
 
     name: str = "custom"
     """Preset this config came from (informational)."""
@@ -36,8 +36,8 @@ class CVPTConfig:
     """Dense layer between the flattened IMPALA features and d_model (VPT uses 256)."""
     memory_len: int = 64
     """Steps of recurrent memory per layer; also the attention span."""
-    num_actions: int = NUM_ACTIONS
-    """Size of the policy head (crafter's 17 actions)."""
+    num_actions: int
+    """Size of the policy head: the game's action count."""
     frame_size: int = 144
     """Frames are frame_size x frame_size RGB."""
     input_downsample: int = 1
@@ -54,11 +54,11 @@ class CVPTConfig:
     every state."""
 
     @classmethod
-    def from_name(cls, name: str, **overrides: Any) -> CVPTConfig:
-        """A preset by name, with any field overridden."""
+    def from_name(cls, name: str, num_actions: int, **overrides: Any) -> CVPTConfig:
+        """A preset by name for a game of ``num_actions`` actions, with any field overridden."""
         if name not in PRESETS:
             raise ValueError(f"unknown C-VPT preset {name!r}; expected one of {sorted(PRESETS)}")
-        return dataclasses.replace(PRESETS[name], **overrides)
+        return cls(**{"name": name, "num_actions": num_actions, **PRESETS[name], **overrides})
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> CVPTConfig:
@@ -79,13 +79,11 @@ class CVPTConfig:
         return values
 
 
-PRESETS: dict[str, CVPTConfig] = {
+PRESETS: dict[str, dict[str, Any]] = {
     # Paper: 3.2M / 15.9M / 64.3M parameters (tests check these within 5%).
-    "tiny": CVPTConfig(name="tiny", d_model=128, d_ff=512, n_heads=4, n_layers=2, impala_width=1),
-    "base": CVPTConfig(name="base", d_model=512, d_ff=2048, n_heads=4, n_layers=4, impala_width=1),
-    "large": CVPTConfig(
-        name="large", d_model=1024, d_ff=4096, n_heads=8, n_layers=4, impala_width=4
-    ),
+    "tiny": {"d_model": 128, "d_ff": 512, "n_heads": 4, "n_layers": 2, "impala_width": 1},
+    "base": {"d_model": 512, "d_ff": 2048, "n_heads": 4, "n_layers": 4, "impala_width": 1},
+    "large": {"d_model": 1024, "d_ff": 4096, "n_heads": 8, "n_layers": 4, "impala_width": 4},
 }
 PAPER_PARAMS = {"tiny": 3.2e6, "base": 15.9e6, "large": 64.3e6}
 

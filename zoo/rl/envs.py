@@ -17,6 +17,7 @@ import torch
 
 from zoo.envs.base import episode_seed
 from zoo.envs.tasks import TaskEnv, make_task_env
+from zoo.models.sampling import sample_actions
 
 
 @dataclass
@@ -208,8 +209,7 @@ class PlannerEnv:
         finished: list[EpisodeStats] = []
         env_steps, began, env_seconds = 0, time.perf_counter(), 0.0
         for _ in range(self.option_steps):
-            probs = torch.softmax(self.executor.logits(captions), -1).cpu()
-            actions = torch.multinomial(probs, 1, generator=self._generator)[:, 0].numpy()
+            actions = sample_actions(self.executor.logits(captions), generator=self._generator)
             actions[waiting] = 0  # noop until the option ends
             tick = time.perf_counter()
             t = self.tasks.step(actions)

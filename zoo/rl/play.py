@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from zoo.agents.base import EpisodeStreams
-from zoo.agents.cvpt_agent import sample_actions
+from zoo.models.sampling import sample_actions
 from zoo.envs.base import Step
 from zoo.rl.envs import CaptionExecutor, planner_observation
 from zoo.weights.checkpoint_io import CheckpointError, read_torch_file

@@ -27,6 +27,7 @@ import torch
 import yaml
 
 from zoo.files import atomic_path
+from zoo.models.sampling import sample_actions
 from zoo.rl.agents import build_agent
 from zoo.rl.config import RLConfig
 from zoo.rl.policies import count_parameters
@@ -66,7 +67,7 @@ class Rollout:
 def sample(logits: torch.Tensor, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
     """Actions (N,) drawn from softmax(logits) and their log-probabilities."""
     logp = torch.log_softmax(logits.float(), -1).cpu()
-    actions = torch.multinomial(logp.exp(), 1, generator=generator)[:, 0]
+    actions = torch.from_numpy(sample_actions(logp, generator=generator, log_probs=True))
     return actions, logp.gather(1, actions[:, None])[:, 0]
 
 

@@ -21,6 +21,7 @@ import torch
 from safetensors.torch import load_file, save_file
 from torch import nn
 
+from zoo.envs.constants import NUM_ACTIONS
 from zoo.files import sha256_file
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.weights.checkpoint_io import ZOO_CHECKPOINT, CheckpointError, read_torch_file
@@ -34,14 +35,18 @@ RESERVED_KEYS = ("kind", "dtype")  # config.json keys that are not config fields
 
 
 def config_from_hparams(hparams: dict[str, Any]) -> CVPTConfig:
-    """The CVPTConfig of a ``lit_models.cvpt.CVPT`` run: preset ``model`` + non-None size overrides."""
+    """The CVPTConfig of a ``lit_models.cvpt.CVPT`` run: preset ``model`` + non-None size overrides.
+
+    The run's hyper-parameters hold no action count (CVPT trains on the game's actions), so
+    the game's is used unless they name one.
+    """
     if "model" not in hparams:
         raise ValueError(f"checkpoint hyper_parameters have no 'model' preset: {sorted(hparams)}")
     fields = {f.name for f in dataclasses.fields(CVPTConfig)} - {"name"}
     overrides = {k: v for k, v in hparams.items() if k in fields and v is not None}
     if "impala_channels" in overrides:
         overrides["impala_channels"] = tuple(overrides["impala_channels"])
-    return CVPTConfig.from_name(hparams["model"], **overrides)
+    return CVPTConfig.from_name(hparams["model"], **{"num_actions": NUM_ACTIONS, **overrides})
 
 
 # Per-kind builders import their model lazily: open_clip and peft are slow to import and a

@@ -10,6 +10,7 @@ import torch
 
 from zoo.agents.cvpt_agent import CVPTAgent, CVPTPolicy
 from zoo.envs.base import Step
+from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.weights import load_model
 from zoo.weights.export import export_checkpoint
@@ -26,7 +27,7 @@ def checkpoint(tmp_path_factory) -> tuple[Path, CVPTModel]:
     torch.manual_seed(0)
     overrides = {k: v for k, v in HPARAMS.items() if k not in ("model", "lr")}
     overrides["impala_channels"] = tuple(overrides["impala_channels"])
-    model = CVPTModel(CVPTConfig.from_name("tiny", **overrides)).eval()
+    model = CVPTModel(CVPTConfig.from_name("tiny", NUM_ACTIONS, **overrides)).eval()
     path = tmp_path_factory.mktemp("ckpt") / "last.ckpt"
     state_dict = {f"model.{k}": v for k, v in model.state_dict().items()}
     torch.save({"state_dict": state_dict, "hyper_parameters": HPARAMS, "global_step": 3}, path)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +15,7 @@ from zoo.agents.dagger import DaggerMixture
 from zoo.cli import main
 from zoo.data.reader import iter_episodes
 from zoo.envs.base import Step
+from zoo.envs.constants import NUM_ACTIONS
 from zoo.experts.scripted import ScriptedExpert
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.weights.export import checkpoint_sha256, save_exported
@@ -76,27 +79,37 @@ def test_mixture_rejects_bad_arguments() -> None:
 @pytest.fixture(scope="module")
 def learner(tmp_path_factory) -> Path:
     torch.manual_seed(0)
-    model = CVPTModel(CVPTConfig.from_name("tiny", **SIZES)).eval()
+    model = CVPTModel(CVPTConfig.from_name("tiny", NUM_ACTIONS, **SIZES)).eval()
     return save_exported(model, tmp_path_factory.mktemp("learner") / "cvpt")
+
+
+PLAY = ["--env", "crafter", "--episodes", "2", "--episodes-per-shard", "1", "--max-steps", "60",
+        "--seed", "3", "--no-progress"]
+
+
+def _dagger_argv(learner: Path, out: Path, beta: str = "0.25", num_envs: int = 2) -> list[str]:
+    return ["data", "dagger", "--checkpoint", str(learner), "--beta", beta, "--mix", "step",
+            "--round", "2", *PLAY, "--num-envs", str(num_envs), "--out", str(out)]
+
+
+def _shas(root: Path) -> dict[str, str]:
+    manifest = json.loads((root / "manifest.json").read_text())
+    return {e["file"]: e["sha256"] for e in manifest["shards"]}
 
 
 @pytest.fixture(scope="module")
 def dagger_data(learner: Path, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("dagger") / "r1"
-    argv = ["data", "dagger", "--checkpoint", str(learner), "--beta", "0.25", "--mix", "step",
-            "--round", "2", "--env", "crafter", "--episodes", "2", "--episodes-per-shard", "1",
-            "--max-steps", "60", "--seed", "3", "--num-envs", "2", "--out", str(out),
-            "--no-progress"]
-    assert main(argv) == 0
+    assert main(_dagger_argv(learner, out)) == 0
     return out
 
 
 def test_dagger_manifest_records_the_round_learner_and_beta(dagger_data, learner) -> None:
     manifest = json.loads((dagger_data / "manifest.json").read_text())
-    config = manifest["config"]
-    assert config["source"] == "dagger" and config["round"] == 2
-    assert config["beta"] == 0.25 and config["mix"] == "step"
-    assert config["learner_sha256"] == checkpoint_sha256(learner)
+    dagger = manifest["config"]["dagger"]
+    assert dagger["round"] == 2 and dagger["beta"] == 0.25 and dagger["mix"] == "step"
+    assert dagger["learner_sha256"] == checkpoint_sha256(learner)
+    assert not {"source", "learner", "beta"} & set(manifest["config"])
     for entry in manifest["shards"]:
         assert 0.0 <= entry["dagger"]["learner_agreement"] <= 1.0
         assert 0.0 < entry["dagger"]["expert_share"] < 0.6  # ~beta of the steps
@@ -121,17 +134,31 @@ def test_stored_actions_are_the_expert_labels_of_the_visited_states(dagger_data)
 
 
 def test_dagger_rerun_is_identical_and_refuses_another_learner(dagger_data, learner, tmp_path) -> None:
-    shas = {e["file"]: e["sha256"] for e in json.loads((dagger_data / "manifest.json").read_text())["shards"]}
     out = tmp_path / "again"
-    argv = ["data", "dagger", "--checkpoint", str(learner), "--beta", "0.25", "--mix", "step",
-            "--round", "2", "--env", "crafter", "--episodes", "2", "--episodes-per-shard", "1",
-            "--max-steps", "60", "--seed", "3", "--num-envs", "1", "--out", str(out),
-            "--no-progress"]
-    assert main(argv) == 0
-    again = {e["file"]: e["sha256"] for e in json.loads((out / "manifest.json").read_text())["shards"]}
-    assert again == shas  # the bytes depend on the seed, not on --num-envs
-    argv[argv.index("0.25")] = "0.5"
-    assert main(argv) == 2  # another beta in the same folder is refused
+    assert main(_dagger_argv(learner, out, num_envs=1)) == 0
+    assert _shas(out) == _shas(dagger_data)  # the bytes depend on the seed, not on --num-envs
+    assert main(_dagger_argv(learner, out, beta="0.5")) == 2  # another beta: refused
+
+
+def test_a_dagger_folder_of_the_old_flat_manifest_resumes_and_refuses_expert_play(
+    dagger_data, learner, tmp_path, capsys
+) -> None:
+    """A folder whose manifest holds the DAgger settings flat beside ``source`` (as written
+    before ``GenerationConfig.dagger``) resumes with its own arguments, keeps its shards, and
+    refuses expert play, as a nested one does; `zoo data info` shows its settings."""
+    root = tmp_path / "old"
+    shutil.copytree(dagger_data, root)
+    manifest = json.loads((root / "manifest.json").read_text())
+    manifest["config"].update(source="dagger", **manifest["config"].pop("dagger"))
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    assert main(_dagger_argv(learner, root)) == 0
+    assert _shas(root) == _shas(dagger_data)
+    assert json.loads((root / "manifest.json").read_text())["config"]["dagger"]["beta"] == 0.25
+    capsys.readouterr()
+    assert main(["data", "generate", "--expert", "scripted", *PLAY, "--out", str(root)]) == 2
+    assert re.search(r"dagger: \{.*'round': 2\} there vs None now", capsys.readouterr().err)
+    assert main(["data", "info", str(root)]) == 0
+    assert "DAgger round 2: learner " in capsys.readouterr().out
 
 
 def test_dagger_cli_errors_name_the_argument(tmp_path, capsys) -> None:

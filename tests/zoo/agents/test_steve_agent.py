@@ -8,6 +8,7 @@ import torch
 
 from zoo.agents.steve_agent import GoalEncoder, SteveAgent, StevePolicy
 from zoo.envs.base import Step
+from zoo.envs.constants import NUM_ACTIONS
 from zoo.envs.schema import empty_state
 from zoo.models.cclip import CCLIPConfig, CCLIPModel
 from zoo.models.cvpt import CVPTConfig, CVPTModel
@@ -27,7 +28,7 @@ def goals() -> GoalEncoder:
 def _policy(cfg_scale: float = 1.5) -> StevePolicy:
     torch.manual_seed(1)
     backbone = CVPTModel(CVPTConfig.from_name(
-        "tiny", d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(2, 4, 4),
+        "tiny", NUM_ACTIONS, d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(2, 4, 4),
         encoder_hidden=32, memory_len=4, input_downsample=4,
     ))
     model = SteveModel(backbone, SteveConfig(goal_dim=64, lora_rank=2))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.models.steve import SteveConfig, SteveModel, combine_guidance
 
@@ -14,7 +15,7 @@ GOAL_DIM = 8
 def _backbone(seed: int = 0, head_hidden: int = 0) -> CVPTModel:
     torch.manual_seed(seed)
     config = CVPTConfig.from_name(
-        "tiny", d_model=32, d_ff=64, n_layers=2, n_heads=2, encoder_hidden=32,
+        "tiny", NUM_ACTIONS, d_model=32, d_ff=64, n_layers=2, n_heads=2, encoder_hidden=32,
         impala_channels=(4, 8, 8), memory_len=8, input_downsample=4, head_hidden=head_hidden,
     )
     return CVPTModel(config).eval()

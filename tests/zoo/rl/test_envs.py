@@ -7,7 +7,7 @@ import torch
 
 from zoo.agents.steve_agent import StevePolicy
 from zoo.envs.base import Step, episode_seed
-from zoo.envs.constants import Achievement, Block, Item
+from zoo.envs.constants import NUM_ACTIONS, Achievement, Block, Item
 from zoo.envs.schema import empty_state
 from zoo.envs.tasks import TASKS, TaskProgress
 from zoo.models.cvpt import CVPTConfig, CVPTModel
@@ -112,7 +112,7 @@ class ScriptedTasks:
 def _steve(goal_dim: int = 8) -> StevePolicy:
     torch.manual_seed(0)
     backbone = CVPTModel(CVPTConfig.from_name(
-        "tiny", d_model=16, d_ff=32, n_heads=2, n_layers=1, impala_channels=(2, 4, 4),
+        "tiny", NUM_ACTIONS, d_model=16, d_ff=32, n_heads=2, n_layers=1, impala_channels=(2, 4, 4),
         encoder_hidden=16, memory_len=4, input_downsample=4,
     ))
     return StevePolicy(SteveModel(backbone, SteveConfig(goal_dim=goal_dim, lora_rank=0)))

@@ -12,6 +12,7 @@ import torch
 from zoo.agents import checkpoint_kind, load_checkpoint_agent
 from zoo.cli import main
 from zoo.envs.base import Step
+from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.rl.config import RLConfig
 from zoo.rl.train import list_checkpoints, train_rl
@@ -31,7 +32,7 @@ def _step(n: int, seed: int = 0) -> Step:
 def _tiny_cvpt(folder, seed: int = 0):
     torch.manual_seed(seed)
     model = CVPTModel(CVPTConfig.from_name(
-        "tiny", d_model=32, d_ff=64, n_heads=2, n_layers=2, impala_channels=(2, 4, 4),
+        "tiny", NUM_ACTIONS, d_model=32, d_ff=64, n_heads=2, n_layers=2, impala_channels=(2, 4, 4),
         encoder_hidden=32, memory_len=4, input_downsample=4,
     ))
     return save_exported(model, folder)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.rl.policies import CVPTRLPolicy, FrameEncoder, RecurrentActorCritic, count_parameters
 
@@ -14,7 +15,7 @@ N, T = 3, 6
 def _cvpt() -> CVPTModel:
     torch.manual_seed(0)
     return CVPTModel(CVPTConfig.from_name(
-        "tiny", d_model=32, d_ff=64, n_heads=2, n_layers=2, impala_channels=(2, 4, 4),
+        "tiny", NUM_ACTIONS, d_model=32, d_ff=64, n_heads=2, n_layers=2, impala_channels=(2, 4, 4),
         encoder_hidden=32, memory_len=4, input_downsample=4,
     ))
 

@@ -12,7 +12,8 @@ import numpy as np
 from zoo.envs.constants import Achievement as Ach
 from zoo.envs.constants import Action, Block, Item, Mob
 from zoo.experts.scripted.config import ExpertConfig
-from zoo.experts.scripted.navigation import next_to, shift
+from zoo.experts.scripted.farming import FarmingGoals
+from zoo.experts.scripted.navigation import next_to
 from zoo.experts.scripted.skills import (
     act_on,
     craft,
@@ -24,7 +25,7 @@ from zoo.experts.scripted.skills import (
     pick_explore_target,
 )
 from zoo.experts.scripted.survival import SurvivalGoals
-from zoo.experts.scripted.world import MOVES, PLACEABLE, STONE_PLACEABLE, WALL, View
+from zoo.experts.scripted.world import MOVES, PLACEABLE, STONE_PLACEABLE, View
 
 # Tool -> (action, wood, stone, coal, iron, needs furnace). Craftax also takes stone for iron tools.
 RECIPES = {
@@ -37,7 +38,7 @@ RECIPES = {
 }
 
 
-class EnvPlanner(SurvivalGoals):
+class EnvPlanner(SurvivalGoals, FarmingGoals):
     """Memory and decisions of the expert in one env; re-created at every episode start."""
 
     def __init__(self, seed: int, config: ExpertConfig) -> None:
@@ -45,7 +46,6 @@ class EnvPlanner(SurvivalGoals):
         self.rng = np.random.default_rng(seed)
         self.explore_target: tuple[int, int] | None = None
         self.explore_until = 0
-        self.plant_guard: tuple[int, int] | None = None
         self.last_goal = ""  # which goal chose the last action (for traces and tests)
         self.instruction: str | None = None  # a caption of INSTRUCTIONS; None: normal play
 
@@ -143,12 +143,6 @@ class EnvPlanner(SurvivalGoals):
                 return action
         return None
 
-    def _first_plant(self, v: View) -> int | None:
-        """With ``plants_first``: a sapling and a plant before anything on the tech tree."""
-        if not self.cfg.plants_first or v.done(Ach.PLACE_PLANT):
-            return None
-        return self._plants(v)
-
     def _skeleton_ready(self, v: View) -> bool:
         """Skeletons shoot: chase them only armed (a stone sword kills in one hit) and healthy."""
         return (
@@ -156,54 +150,6 @@ class EnvPlanner(SurvivalGoals):
             and v.has(Item.STONE_SWORD)
             and v.health >= self.cfg.skeleton_health
         )
-
-    def _plants(self, v: View) -> int | None:
-        """Collect saplings and plant them (sheltered if possible); guard the plant."""
-        cfg = self.cfg
-        grass = (v.map == Block.GRASS) & (v.mobs == 0)
-        if self.plant_guard is not None:
-            action = self._guard_plant(v)
-            if action is not None:
-                return action
-        planted = int(np.count_nonzero((v.map == Block.PLANT) | (v.map == Block.RIPE_PLANT)))
-        if planted >= cfg.plants_wanted and v.done(Ach.COLLECT_SAPLING):
-            return None
-        if v.has(Item.SAPLING):
-            sheltered = self._sheltered_grass(v, grass)
-            for spots in (sheltered, grass):
-                action = face_free(v, spots, int(Action.PLACE_PLANT), max_dist=cfg.near)
-                if action is not None:
-                    if action == Action.PLACE_PLANT and sheltered[v.facing]:
-                        self.plant_guard = v.pos
-                    return action
-            return None
-        if planted < cfg.plants_wanted or not v.done(Ach.COLLECT_SAPLING):
-            return face_free(v, grass, int(Action.DO), max_dist=cfg.near)
-        return None
-
-    def _sheltered_grass(self, v: View, grass: np.ndarray) -> np.ndarray:
-        """Grass with walls on three sides: once planted, one stone seals it from trampling."""
-        wall = (WALL[v.map] | (v.map == Block.WATER)).astype(np.int8)
-        sides = ((0, 1), (0, -1), (1, 0), (-1, 0))
-        count = sum(shift(wall, dr, dc, True).astype(np.int8) for dr, dc in sides)
-        return grass & (count == 3)
-
-    def _guard_plant(self, v: View) -> int | None:
-        """Close the one open side of a sheltered plant with a stone."""
-        cell = self.plant_guard
-        plant_next = any(
-            v.block(v.neighbour(cell, m)) in (Block.PLANT, Block.RIPE_PLANT) for m in MOVES
-        )
-        if not plant_next or not STONE_PLACEABLE[v.block(cell)] or v.mob(cell):
-            self.plant_guard = None
-            return None
-        if not v.has(Item.STONE):
-            return None
-        target = np.zeros(v.shape, bool)
-        target[cell] = True
-        stand = np.ones(v.shape, bool)
-        stand[cell] = False
-        return face_free(v, target, int(Action.PLACE_STONE), stand, max_dist=self.cfg.station_dist)
 
     # --- the tech tree ---------------------------------------------------------------------
     def _basic_tools(self, v: View) -> int | None:
