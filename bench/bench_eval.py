@@ -31,7 +31,7 @@ the budget is spent, so the speeds are the steady state (no tail of a last batch
 The ratio of the goal is Craftax env steps/s / crafter env steps/s, per agent, in this run.
 C-VPT plays with torch's default threads, as ``zoo eval`` does, and again at one torch thread
 (``--cvpt-threads 0 1``): on a loaded 2-core machine 2 torch threads stall each other (see
-docs/results.md), and the JSON's ``notes`` say when they did. ``--more-num-envs 64`` adds the
+docs/results/benchmarks.md), and the JSON's ``notes`` say when they did. ``--more-num-envs 64`` adds the
 scripted expert in Craftax at 64 envs, to see how the ratio grows with the batch. About 5 min.
 Time split: thin timers (``time.perf_counter``) wrapped around ``env.step``, ``env.reset``,
 ``agent.act``, ``agent.reset`` and inside them crafter's ``Env.step`` and ``Env.render`` and the

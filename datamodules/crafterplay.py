@@ -181,6 +181,10 @@ class CrafterPlayDataModule(L.LightningDataModule):
         if hp.noop_filter:
             stages.append(wds.pipelinefilter(filter_noop_chunks)(hp.min_noop_run))
         stages.append(wds.pipelinefilter(pack_sequences)(hp.seq_len, self.extra_keys))
+        for stage in self.sequence_stages():
+            stages.append(stage)
+            if train and hasattr(stage, "start_epoch"):
+                shuffles.append(stage)
         if train and hp.shuffle_buffer > 1:
             shuffles.append(SeededShuffle(hp.shuffle_buffer, salt=1))
             stages.append(shuffles[-1])
@@ -192,6 +196,10 @@ class CrafterPlayDataModule(L.LightningDataModule):
             per_worker = max(1, hp.train_batches_per_epoch // max(1, hp.num_workers))
             pipeline = pipeline.with_epoch(per_worker)
         return EpochSeededStream(pipeline, shuffles, run_seed(hp.seed), first_epoch)
+
+    def sequence_stages(self) -> list[Callable[[Iterable[dict]], Iterator[dict]]]:
+        """Stages over packed sequences, before shuffling (subclasses add theirs)."""
+        return []
 
     def chunk_reader(self) -> Callable[[Iterable[dict]], Iterator[dict]]:
         """The stage that turns shard sources into chunks (subclasses attach more per step)."""

@@ -1,10 +1,10 @@
 """CrafterPlay with hindsight-relabelled goals for C-Steve-1 (paper §4.3, "Dataset Generation").
 
 The CrafterPlay pipeline (shard order, episode splits, noop filter, packing, seeded shuffles)
-unchanged, with one more per-step input: each chunk is read together with its ``zoo data
+unchanged, with one more per-step input: each chunk is read together with its ``zoo goals
 embed`` shard and relabelled (``zoo.goals.attach.GoalAttacher``, ``zoo.goals.relabel``). Batches
 are {frames, actions, first, episode, step} as for C-VPT plus goal float16 (B, S, D),
-goal_mask bool (B, S) (False on unconditional pieces, whose goal is zeros) and goal_step int64
+goal_mask bool (B, S) (False on unconditional pieces or sequences, whose goal is zeros) and goal_step int64
 (B, S) (the episode step whose clip is the goal).
 
 Training goals are redrawn every epoch from (seed, epoch, episode); validation and test goals
@@ -18,8 +18,8 @@ from collections.abc import Callable, Iterable, Iterator
 
 from datamodules.crafterplay import CrafterPlayDataModule
 from zoo.goals.embed import check_embeddings_match, load_embedding_manifest
-from zoo.goals.attach import GOAL_KEYS, GoalAttacher
-from zoo.goals.relabel import RelabelMode, RelabelParams
+from zoo.goals.attach import GOAL_KEYS, GoalAttacher, SequenceGoalDrop
+from zoo.goals.relabel import RelabelMode, RelabelParams, UncondPer
 from zoo.data.sequences import ShardSources
 
 
@@ -36,6 +36,7 @@ class SteveDataModule(CrafterPlayDataModule):
         min_gap: int = 1,
         max_gap: int = 10,
         uncond_prob: float = 0.1,
+        uncond_per: UncondPer = "piece",
         partial_embeddings: bool = False,
         seq_len: int = 640,
         batch_size: int = 128,
@@ -60,7 +61,11 @@ class SteveDataModule(CrafterPlayDataModule):
             run-up) or ``plain`` (STEVE-1's), for the relabelling ablation.
         min_gap: fewest steps a goal lies ahead (paper: 1).
         max_gap: most steps a goal lies ahead (paper: 10).
-        uncond_prob: share of pieces without a goal, for classifier-free guidance (paper: 0.1).
+        uncond_prob: share of pieces (or sequences) without a goal, for classifier-free
+            guidance (paper: 0.1).
+        uncond_per: ``sequence``: ``uncond_prob`` zeroes a whole training sequence's goals
+            (STEVE-1's, which the paper's C-Steve-1 follows; configs/csteve1.yaml); ``piece``:
+            each relabelled piece of 1-10 steps (how the shipped CPU C-Steve-1 was trained).
         partial_embeddings: train on the CrafterPlay shards that ``embeddings`` covers (a
             ``zoo goals embed --shards A:B`` run) instead of refusing an incomplete folder.
         seq_len: steps per sequence (paper: 640).
@@ -94,7 +99,7 @@ class SteveDataModule(CrafterPlayDataModule):
             skip_corrupt=skip_corrupt,
         )
         self.save_hyperparameters()  # after the parent's: this subclass's arguments win
-        self.relabel_params = RelabelParams(relabel, min_gap, max_gap, uncond_prob)
+        self.relabel_params = RelabelParams(relabel, min_gap, max_gap, uncond_prob, uncond_per)
         self._embeddings_checked = False
 
     @property
@@ -126,6 +131,11 @@ class SteveDataModule(CrafterPlayDataModule):
             )
             self._embeddings_checked = True
         return GoalAttacher(self.hparams.embeddings, self.relabel_params, self.hparams.skip_corrupt)
+
+    def sequence_stages(self) -> list[Callable[[Iterable[dict]], Iterator[dict]]]:
+        if self.relabel_params.uncond_per == "sequence":
+            return [SequenceGoalDrop(self.relabel_params.uncond_prob)]
+        return []
 
 
 __all__ = ["SteveDataModule"]

@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import torch
 
-from lit_models.sequence_bc import IGNORE_ACTION, SequenceBC
+from lit_models.sequence_bc import IGNORE_ACTION, SequenceBC, UpdateEvery
+from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.models.steve import Conditioning, SteveConfig, SteveModel
 from zoo.weights import load_model
@@ -37,6 +38,8 @@ class CSteve1(SequenceBC):
         lora_dropout: float = 0.0,
         lora_targets: list[str] | None = None,
         tbptt_len: int = 64,
+        update_every: UpdateEvery = "window",
+        max_grad_norm: float | None = 5.0,
         lr: float = 1e-5,
         weight_decay: float = 1e-4,
         betas: tuple[float, float] = (0.9, 0.999),
@@ -58,6 +61,10 @@ class CSteve1(SequenceBC):
         lora_dropout: dropout on the LoRA branch.
         lora_targets: TrXL linear layers given LoRA (None: query, key_value, out, ff.0, ff.3).
         tbptt_len: window of truncated backprop (paper: 64).
+        update_every: ``window``: one optimizer step per TBPTT window (the paper's: its training
+            code follows STEVE-1's); ``batch``: one per batch (a departure).
+        max_grad_norm: clip the gradient norm to this before each step (paper: 5; None: none).
+            Replaces ``trainer.gradient_clip_val``.
         lr: peak AdamW learning rate (paper: 1e-5).
         weight_decay: AdamW decay of weight matrices (paper: 1e-4).
         betas: AdamW betas.
@@ -65,18 +72,19 @@ class CSteve1(SequenceBC):
         cosine_steps: steps of the cosine decay (None: trainer.max_steps).
         min_lr_ratio: final LR as a fraction of ``lr``.
         label_smoothing: cross-entropy label smoothing.
-        activation_checkpointing: recompute each TBPTT window in backward.
+        activation_checkpointing: with ``update_every: batch``, recompute each window in backward.
         backbone_config: the backbone's C-VPT config; filled in from ``backbone`` on first
             build (leave it unset).
         """
         super().__init__()
         self.save_hyperparameters()
+        self.check_update_every()
         if backbone is None and backbone_config is None:
             raise ValueError(
                 "model.init_args.backbone is required: a C-VPT .ckpt from `zoo fit` or a "
                 "`zoo export` folder to start C-Steve-1 from"
             )
-        self.setup_metrics(CVPTConfig().num_actions)
+        self.setup_metrics(NUM_ACTIONS)
 
     def configure_model(self) -> None:
         """Build the network (Lightning calls this before training and before loading a

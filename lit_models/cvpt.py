@@ -12,7 +12,8 @@ from pathlib import Path
 
 import torch
 
-from lit_models.sequence_bc import SequenceBC
+from lit_models.sequence_bc import SequenceBC, UpdateEvery
+from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.weights import load_model
 from zoo.weights.checkpoint_io import CheckpointError
@@ -57,6 +58,8 @@ class CVPT(SequenceBC):
         input_downsample: int | None = None,
         head_hidden: int | None = None,
         tbptt_len: int = 64,
+        update_every: UpdateEvery = "window",
+        max_grad_norm: float | None = 5.0,
         lr: float = 5e-4,
         weight_decay: float = 1e-4,
         betas: tuple[float, float] = (0.9, 0.999),
@@ -82,6 +85,10 @@ class CVPT(SequenceBC):
             head_hidden: width of the policy head's hidden layer (None: 0, one linear layer;
                 VPT's head has one, and C-Steve-1's head conditioning needs it).
             tbptt_len: window of truncated backprop; the sequence is cut into these.
+            update_every: ``window``: one optimizer step per TBPTT window (the paper's, as
+                STEVE-1); ``batch``: one per batch (a departure; lit_models.sequence_bc).
+            max_grad_norm: clip the gradient norm to this before each step (paper: 5; None:
+                no clipping). Replaces ``trainer.gradient_clip_val``.
             lr: peak AdamW learning rate (paper: 5e-4 tiny/base, 1e-4 large).
             weight_decay: AdamW decay for weight matrices (norms, biases, embeddings: none).
             betas: AdamW betas.
@@ -89,8 +96,8 @@ class CVPT(SequenceBC):
             cosine_steps: steps of the cosine decay (None: trainer.max_steps).
             min_lr_ratio: final LR as a fraction of ``lr``.
             label_smoothing: cross-entropy label smoothing.
-            activation_checkpointing: recompute each TBPTT window in backward (memory of one
-                window instead of the whole sequence).
+            activation_checkpointing: with ``update_every: batch``, recompute each TBPTT window
+                in backward (memory of one window instead of the whole sequence).
             init_weights: a C-VPT ``.ckpt`` or ``zoo export`` folder whose network starts this
                 run with a fresh optimizer and schedule (fine-tuning, or training on past a
                 finished cosine); same architecture required. Loaded in ``setup``, so
@@ -98,6 +105,7 @@ class CVPT(SequenceBC):
         """
         super().__init__()
         self.save_hyperparameters()
+        self.check_update_every()
         overrides = {
             "d_model": d_model,
             "d_ff": d_ff,
@@ -112,7 +120,7 @@ class CVPT(SequenceBC):
             "head_hidden": head_hidden,
         }
         self.config = CVPTConfig.from_name(
-            model, **{k: v for k, v in overrides.items() if v is not None}
+            model, NUM_ACTIONS, **{k: v for k, v in overrides.items() if v is not None}
         )
         self.model = CVPTModel(self.config)
         self.setup_metrics(self.config.num_actions)

@@ -80,9 +80,14 @@ class OnlineEvaluation(Callback):
         self._goals: GoalEncoder | None = None
         self._last_step = -1
 
+    def on_train_start(self, trainer: L.Trainer, pl_module) -> None:
+        self._last_step = trainer.global_step  # a resumed run waits for its next multiple
+
     def on_train_batch_end(self, trainer: L.Trainer, pl_module, outputs, batch, batch_idx) -> None:
+        # A batch may make several optimizer steps (one per TBPTT window): evaluate when the
+        # step count crosses a multiple of every_n_steps, not only when it lands on one.
         step = trainer.global_step
-        if step == 0 or step % self.every_n_steps or step == self._last_step:
+        if step // self.every_n_steps <= max(self._last_step, 0) // self.every_n_steps:
             return
         self._last_step = step
         if trainer.is_global_zero:

@@ -31,6 +31,7 @@ class CVAEPriorModule(L.LightningModule):
         hidden: int = 512,
         latent_dim: int = 256,
         kl_weight: float = 1.0,
+        layer_norm: bool = False,
         lr: float = 1e-3,
         weight_decay: float = 0.0,
         warmup_steps: int = 0,
@@ -43,6 +44,8 @@ class CVAEPriorModule(L.LightningModule):
             hidden: width of the two hidden layers of the encoder and decoder MLPs.
             latent_dim: width of the latent c.
             kl_weight: weight of KL(q(c | z_v, z_t) || N(0, I)) (1: the paper's objective).
+            layer_norm: a LayerNorm after each hidden layer, as Steve-1's prior (the paper
+                config sets it; the shipped CPU prior was trained without).
             lr: peak AdamW learning rate.
             weight_decay: AdamW weight decay.
             warmup_steps: optimizer steps of linear warmup.

@@ -2,20 +2,36 @@
 
 Truncated BPTT: a batch holds long sequences (paper: 640 steps) that the module cuts into
 windows of ``tbptt_len`` (64). The TrXL memory flows from one window into the next with
-stop-gradient, and the optimizer steps once per batch on the mean loss over all steps, so
-the usual Lightning loop (gradient clipping, AMP, DDP, accumulation) applies unchanged. With
-``activation_checkpointing`` each window is recomputed during backward, so activation memory
-is one window's, not the whole sequence's, for ~1/3 more compute.
+stop-gradient. How often the optimizer steps is ``update_every``:
+
+- ``window`` (the paper's; STEVE-1's training loop, which the paper says C-Steve-1 follows):
+  forward, backward and one optimizer step per window, so one step sees batch x tbptt_len
+  frames (128 x 64 = 8,192 at the paper's sizes) and a 640-step batch makes 10 steps. The
+  memory carried into the next window was made by the weights before the step.
+- ``batch`` (a departure, kept for comparison and for the CPU recipes' history): the loss is
+  the mean over every step of the batch and the optimizer steps once per batch. Its gradient
+  is the whole batch's, window-by-window memory included; with ``activation_checkpointing``
+  each window is recomputed during backward, so activation memory is one window's, not the
+  sequence's, for ~1/3 more compute (per-window stepping has one window's activations anyway).
+
+With sequences of ``tbptt_len`` steps (the CPU recipes) the two are the same. The module steps
+its optimizer itself (Lightning's manual optimization), so gradient clipping is the module's
+``max_grad_norm`` (the paper's "Max Grad Norm"), not ``trainer.gradient_clip_val``, and the LR
+schedule advances once per optimizer step; ``trainer.global_step`` and ``trainer.max_steps``
+count optimizer steps in both modes.
 
 A subclass builds ``self.model`` (called as ``model(frames, first, *conditions, state)``), says
 which batch entries are its conditions (``condition_keys``: none for C-VPT, the goal for
 C-Steve-1) and calls ``save_hyperparameters`` with lr, weight_decay, betas, warmup_steps,
-cosine_steps, min_lr_ratio, label_smoothing, tbptt_len and activation_checkpointing among them.
-Only parameters with ``requires_grad`` reach the optimizer (C-Steve-1 trains LoRA and its
-conditioning layer alone).
+cosine_steps, min_lr_ratio, label_smoothing, tbptt_len, update_every, max_grad_norm and
+activation_checkpointing among them. Only parameters with ``requires_grad`` reach the
+optimizer (C-Steve-1 trains LoRA and its conditioning layer alone).
 """
 
 from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Literal
 
 import lightning as L
 import torch
@@ -42,16 +58,40 @@ def accuracy_metrics(num_actions: int, prefix: str) -> MetricCollection:
     )
 
 
+UpdateEvery = Literal["window", "batch"]
+UPDATE_EVERY: tuple[str, ...] = ("window", "batch")
+
+
 class SequenceBC(L.LightningModule):
     """Cross-entropy on expert actions over TBPTT windows (see the module docstring)."""
 
     model: nn.Module
     condition_keys: tuple[str, ...] = ()
 
+    def __init__(self) -> None:
+        super().__init__()
+        self.automatic_optimization = False  # per-window steps: the module steps the optimizer
+
+    def check_update_every(self) -> None:
+        """Refuse an unknown ``update_every`` when the module is built, not at its first step."""
+        if self.hparams.update_every not in UPDATE_EVERY:
+            raise ValueError(
+                f"model.init_args.update_every={self.hparams.update_every!r}: expected one of"
+                f" {UPDATE_EVERY} (window: the paper's one optimizer step per TBPTT window)"
+            )
+
     def setup_metrics(self, num_actions: int) -> None:
         self.train_metrics = accuracy_metrics(num_actions, "train/")
         self.val_metrics = accuracy_metrics(num_actions, "val/")
         self.test_metrics = accuracy_metrics(num_actions, "test/")
+
+    def _windows(
+        self, frames: torch.Tensor, first: torch.Tensor, conditions: tuple[torch.Tensor, ...]
+    ) -> Iterator[tuple[slice, list[torch.Tensor]]]:
+        """Each TBPTT window's slice of the time axis and the model inputs inside it."""
+        for start in range(0, frames.shape[1], self.hparams.tbptt_len):
+            window = slice(start, start + self.hparams.tbptt_len)
+            yield window, [frames[:, window], first[:, window], *(c[:, window] for c in conditions)]
 
     def forward(
         self, frames: torch.Tensor, first: torch.Tensor, *conditions: torch.Tensor
@@ -62,9 +102,7 @@ class SequenceBC(L.LightningModule):
         )
         state = self.model.initial_state(frames.shape[0], frames.device)
         window_logits = []
-        for start in range(0, frames.shape[1], self.hparams.tbptt_len):
-            window = slice(start, start + self.hparams.tbptt_len)
-            inputs = [frames[:, window], first[:, window], *(c[:, window] for c in conditions)]
+        for _, inputs in self._windows(frames, first, conditions):
             if recompute:
                 logits, state = checkpoint(self.model, *inputs, state, use_reentrant=False)
             else:
@@ -86,15 +124,61 @@ class SequenceBC(L.LightningModule):
         )
         return loss_sum / (actions != IGNORE_ACTION).sum().clamp(min=1)
 
+    def _optimizer_step(self, loss: torch.Tensor) -> None:
+        """Backward ``loss``, clip to ``max_grad_norm``, step the optimizer and the schedule."""
+        optimizer = self.optimizers()
+        optimizer.zero_grad(set_to_none=True)
+        self.manual_backward(loss)
+        if self.hparams.max_grad_norm is not None:
+            self.clip_gradients(
+                optimizer, gradient_clip_val=self.hparams.max_grad_norm,
+                gradient_clip_algorithm="norm",
+            )
+        optimizer.step()
+        self.lr_schedulers().step()
+
+    def _out_of_steps(self) -> bool:
+        """True once ``trainer.max_steps`` optimizer steps are done (a batch may end early)."""
+        max_steps = self.trainer.max_steps
+        return max_steps is not None and 0 <= max_steps <= self.trainer.global_step
+
+    def _train_per_window(
+        self, batch: dict[str, torch.Tensor]
+    ) -> tuple[torch.Tensor, torch.Tensor, int]:
+        """One optimizer step per window: the windows' logits (detached), their mean loss and
+        how many steps they cover (fewer than the batch's when ``max_steps`` ends it early)."""
+        actions = batch["actions"]
+        conditions = tuple(batch[k] for k in self.condition_keys)
+        state = self.model.initial_state(actions.shape[0], actions.device)
+        window_logits, loss_sum, counted = [], actions.new_zeros((), dtype=torch.float32), 0
+        for window, inputs in self._windows(batch["frames"], batch["first"], conditions):
+            if window_logits and self._out_of_steps():
+                break
+            logits, state = self.model(*inputs, state)
+            loss = self._loss(logits, actions[:, window])
+            self._optimizer_step(loss)
+            count = int((actions[:, window] != IGNORE_ACTION).sum())
+            loss_sum, counted = loss_sum + loss.detach() * count, counted + count
+            window_logits.append(logits.detach())
+        done = sum(w.shape[1] for w in window_logits)
+        return torch.cat(window_logits, dim=1), loss_sum / max(counted, 1), done
+
     def training_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> torch.Tensor:
         actions = batch["actions"]
-        logits = self.batch_logits(batch)
-        loss = self._loss(logits, actions)
+        if self.hparams.update_every == "window":
+            logits, loss, done = self._train_per_window(batch)
+            actions = actions[:, :done]
+        else:
+            logits = self.batch_logits(batch)
+            loss = self._loss(logits, actions)
+            self._optimizer_step(loss)
+            logits, loss = logits.detach(), loss.detach()
         batch_size = actions.shape[0]
         self.log("train/loss", loss, prog_bar=True, batch_size=batch_size)
         self.log("train/lr", self.lr_schedulers().get_last_lr()[0], batch_size=batch_size)
-        metrics = self.train_metrics(logits.detach().flatten(0, 1), actions.flatten())
-        self.log_dict(metrics, batch_size=batch_size)
+        if actions.shape[1]:
+            metrics = self.train_metrics(logits.flatten(0, 1), actions.flatten())
+            self.log_dict(metrics, batch_size=batch_size)
         return loss
 
     def _eval_step(
@@ -159,4 +243,4 @@ class SequenceBC(L.LightningModule):
         }
 
 
-__all__ = ["IGNORE_ACTION", "SequenceBC", "accuracy_metrics"]
+__all__ = ["IGNORE_ACTION", "UPDATE_EVERY", "SequenceBC", "UpdateEvery", "accuracy_metrics"]

@@ -30,16 +30,18 @@ def crafterplay(tmp_path_factory) -> Path:
     return out
 
 
-def _fit(crafterplay: Path, root: Path, max_steps: int, *extra: str, wandb: bool = False):
+def _fit(crafterplay: Path, root: Path, max_steps: int, *extra: str, wandb: bool = False,
+         windows: int = 1):
     """An in-process `zoo fit` of the smoke config; W&B (a service start each, up to a minute on
-    a loaded machine) only in the one test that checks it."""
+    a loaded machine) only in the one test that checks it. Sequences of 8 steps in ``windows``
+    TBPTT windows: one optimizer step per window."""
     return run_lightning_cli([
         "fit", f"--config={CONFIG}", f"--trainer.default_root_dir={root}",
         f"--trainer.max_steps={max_steps}", "--trainer.limit_val_batches=1",
         "--trainer.enable_progress_bar=false", f"--data.init_args.root={crafterplay}",
         "--data.init_args.seq_len=8", "--data.init_args.batch_size=2",
         "--data.init_args.num_workers=0", "--data.init_args.val_fraction=0.3",
-        "--data.init_args.train_batches_per_epoch=2", "--model.init_args.tbptt_len=4",
+        "--data.init_args.train_batches_per_epoch=2", f"--model.init_args.tbptt_len={8 // windows}",
         "--model.init_args.memory_len=4", *([] if wandb else ["--trainer.logger=false"]), *extra,
     ])
 
@@ -63,7 +65,7 @@ def test_fit_writes_run_folder_and_resumes_at_the_same_step(
     assert saved["global_step"] == 2
     # the config file's width and the command line's override, as the checkpoint rebuilds them
     hparams = saved["hyper_parameters"]
-    assert (hparams["d_model"], hparams["memory_len"], hparams["tbptt_len"]) == (64, 4, 4)
+    assert (hparams["d_model"], hparams["memory_len"], hparams["tbptt_len"]) == (64, 4, 8)
     assert any(p.name.startswith("best-") for p in (run_dir / "checkpoints").iterdir())
     full_configs = [p["config"] for p in logged if "config" in p]
     assert full_configs[0]["model"]["class_path"] == "lit_models.cvpt.CVPT"
@@ -194,25 +196,28 @@ def test_fit_with_the_data_order_alone_changed_ends_elsewhere(
     assert any(not torch.equal(a[k], b[k]) for k in a)
 
 
+@pytest.mark.parametrize("windows", [1, 2])
 def test_fit_resumed_from_last_ckpt_ends_like_a_straight_fit(
-    crafterplay: Path, tmp_path: Path
+    crafterplay: Path, tmp_path: Path, windows: int
 ) -> None:
-    """2 steps, then --ckpt_path=last.ckpt on to 4, against a straight 4-step fit: the same
-    parameters, optimizer state and LR schedule, bit for bit (CPU, no dropout)."""
+    """2 batches, then --ckpt_path=last.ckpt on to 4, against a straight 4-batch fit: the same
+    parameters, optimizer state and LR schedule, bit for bit (CPU, no dropout); with one
+    optimizer step per batch and with two (one per TBPTT window)."""
     # An epoch is train_batches_per_epoch=2 batches; last.ckpt is written by the validation at
-    # the end of epoch 0 (step 2). The resumed fit's shuffles must be seeded with the restored
-    # epoch 1, as the straight fit's second epoch is, or steps 3-4 train on other batches.
-    # The cosine length is fixed at the full run's 4 steps: the interrupted fit is the same run.
-    same = ("--model.init_args.cosine_steps=4",)
-    _fit(crafterplay, tmp_path / "straight", 4, *same)
-    _fit(crafterplay, tmp_path / "interrupted", 2, *same)
+    # the end of epoch 0 (batch 2). The resumed fit's shuffles must be seeded with the restored
+    # epoch 1, as the straight fit's second epoch is, or batches 3-4 train on others.
+    # The cosine length is fixed at the full run's steps: the interrupted fit is the same run.
+    same = (f"--model.init_args.cosine_steps={4 * windows}",)
+    _fit(crafterplay, tmp_path / "straight", 4 * windows, *same, windows=windows)
+    _fit(crafterplay, tmp_path / "interrupted", 2 * windows, *same, windows=windows)
     (interrupted,) = (tmp_path / "interrupted").iterdir()
     first_part = interrupted / "checkpoints" / "last.ckpt"
-    assert torch.load(first_part, weights_only=True)["global_step"] == 2
-    _fit(crafterplay, tmp_path / "resumed", 4, *same, f"--ckpt_path={first_part}")
+    assert torch.load(first_part, weights_only=True)["global_step"] == 2 * windows
+    _fit(crafterplay, tmp_path / "resumed", 4 * windows, *same, f"--ckpt_path={first_part}",
+         windows=windows)
 
     a, b = (_last_checkpoint(tmp_path / run) for run in ("straight", "resumed"))
-    assert a["global_step"] == b["global_step"] == 4
+    assert a["global_step"] == b["global_step"] == 4 * windows
     torch.testing.assert_close(b["state_dict"], a["state_dict"], rtol=0, atol=0)
     (opt_a,), (opt_b,) = a["optimizer_states"], b["optimizer_states"]
     torch.testing.assert_close(opt_b["state"], opt_a["state"], rtol=0, atol=0)
@@ -230,7 +235,10 @@ def test_missing_data_is_one_line_and_leaves_no_run_folder(tmp_path: Path, capsy
             "--trainer.enable_progress_bar=false", "--data.init_args.num_workers=0"]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith("zoo fit: ") and str(missing / "manifest.json") in err[-1]
+    assert err[-1] == (
+        f"zoo fit: {missing / 'manifest.json'} not found: not a CrafterPlay folder (make it with "
+        "`zoo data generate`); or point data.init_args at an existing folder"
+    )
     assert "Traceback" not in "\n".join(err)
     assert not any((tmp_path / "runs").glob("*"))  # the failed run's folder is gone
 
@@ -286,7 +294,7 @@ def test_ddp_on_two_cpu_processes_trains_one_run_to_the_step_count(
         "--trainer.devices=2", "--trainer.strategy=ddp", f"--data.init_args.root={crafterplay}",
         "--data.init_args.seq_len=8", "--data.init_args.batch_size=2",
         "--data.init_args.num_workers=0", "--data.init_args.val_fraction=0.3",
-        "--data.init_args.train_batches_per_epoch=2", "--model.init_args.tbptt_len=4",
+        "--data.init_args.train_batches_per_epoch=2", "--model.init_args.tbptt_len=8",
         "--model.init_args.memory_len=4",
     ]
     env = {k: v for k, v in os.environ.items() if "ZOO_" not in k} | {"OMP_NUM_THREADS": "1"}

@@ -28,7 +28,8 @@ TINY = {
     "chunk_length": 50, "workers": 1, "heldout_episodes": 1, "val_episodes": 1,
     "balance": "none", "per_unit": None, "per_shard": 500,
     "cvpt_config": str(REPO / "configs/cvpt_smoke.yaml"),
-    "cvpt_args": QUIET + "--trainer.max_steps=2 --data.init_args.num_workers=0 "
+    # 2 batches of 2 TBPTT windows: 4 optimizer steps, one validation at the epoch's end
+    "cvpt_args": QUIET + "--trainer.max_steps=4 --data.init_args.num_workers=0 "
     "--data.init_args.train_batches_per_epoch=2 --data.init_args.batch_size=2 "
     "--data.init_args.seq_len=16 --model.init_args.tbptt_len=8 --model.init_args.memory_len=8",
     "cclip_config": str(REPO / "configs/cclip_smoke.yaml"),
@@ -38,9 +39,9 @@ TINY = {
     "--model.init_args.vision_layers=1 --model.init_args.text_layers=1",
     "eval_episodes": 1, "eval_max_steps": 20, "retrieval": True, "steve": True,
     "csteve1_config": str(REPO / "configs/csteve1_cpu.yaml"),
-    "csteve1_args": QUIET + "--trainer.max_steps=2 --trainer.max_time=null "
+    "csteve1_args": QUIET + "--trainer.max_steps=4 --trainer.max_time=null "
     "--trainer.precision=32 --model.init_args.tbptt_len=8 --model.init_args.warmup_steps=1 "
-    "--model.init_args.cosine_steps=2 --data.init_args.seq_len=16 --data.init_args.batch_size=2 "
+    "--model.init_args.cosine_steps=4 --data.init_args.seq_len=16 --data.init_args.batch_size=2 "
     "--data.init_args.num_workers=0 --data.init_args.val_fraction=0.3 "
     "--data.init_args.test_fraction=0.0 --data.init_args.train_batches_per_epoch=2",
     "prior_split": "train", "prior_max_pairs": None,

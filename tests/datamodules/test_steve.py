@@ -94,3 +94,19 @@ def test_partial_embeddings_train_on_the_embedded_shards_only(
         batches = _batches(_module(steve_play, tmp_path, partial_embeddings=True))
     embedded = set(_all_goals(tmp_path))
     assert {int(e) for b in batches for e in b["episode"].flatten()} <= embedded
+
+
+def test_uncond_per_sequence_drops_whole_sequences_and_follows_the_epoch(
+    steve_play: Path, steve_embeddings: Path
+) -> None:
+    """STEVE-1's unconditional goals: a sequence has all its goals or none; which ones is
+    seeded and redrawn per epoch."""
+    def masks(epoch: int) -> torch.Tensor:
+        module = _module(steve_play, steve_embeddings, uncond_prob=0.5, uncond_per="sequence")
+        return torch.cat([b["goal_mask"] for b in _batches(module, epoch)])
+
+    first = masks(0)
+    whole = first.all(dim=1) | ~first.any(dim=1)
+    assert whole.all() and first.all(dim=1).any() and (~first.any(dim=1)).any()
+    assert torch.equal(first, masks(0))
+    assert any(not torch.equal(first, masks(epoch)) for epoch in (1, 2, 3))

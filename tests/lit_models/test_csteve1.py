@@ -11,6 +11,7 @@ import torch
 from torch.utils.data import DataLoader
 
 from lit_models.csteve1 import CSteve1
+from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.weights.export import save_exported
 
@@ -20,7 +21,7 @@ GOAL_DIM = 17  # one-hot goals naming the action to take
 def _backbone_export(root: Path) -> Path:
     torch.manual_seed(0)
     config = CVPTConfig.from_name(
-        "tiny", d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(2, 4, 4),
+        "tiny", NUM_ACTIONS, d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(2, 4, 4),
         encoder_hidden=32, memory_len=4, input_downsample=4,
     )
     return save_exported(CVPTModel(config), root / "cvpt_export")

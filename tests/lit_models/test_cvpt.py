@@ -50,7 +50,7 @@ def _repeat(batch: dict[str, torch.Tensor], n: int) -> DataLoader:
 def _trainer(max_steps: int, root: Path) -> L.Trainer:
     return L.Trainer(
         max_steps=max_steps, logger=False, enable_checkpointing=False, enable_progress_bar=False,
-        enable_model_summary=False, accelerator="cpu", default_root_dir=root, gradient_clip_val=5.0,
+        enable_model_summary=False, accelerator="cpu", default_root_dir=root,
     )
 
 

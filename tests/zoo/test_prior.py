@@ -110,3 +110,14 @@ def test_checkpoint_reload_gives_identical_outputs(tmp_path):
     torch.save({"state_dict": {}}, tmp_path / "other.ckpt")
     with pytest.raises(ValueError, match="hyper_parameters"):
         load_model(tmp_path / "other.ckpt", "prior")
+
+
+def test_layer_norm_follows_each_hidden_layer_and_old_configs_load_without():
+    """Steve-1's prior: Linear -> LayerNorm -> ReLU twice, then Linear; a config saved before
+    the option (no layer_norm key) builds the plain MLPs its weights were trained as."""
+    model = CVAEPrior(PriorConfig(embed_dim=8, hidden=16, latent_dim=4, layer_norm=True))
+    kinds = [type(m).__name__ for m in model.encoder]
+    assert kinds == ["Linear", "LayerNorm", "ReLU", "Linear", "LayerNorm", "ReLU", "Linear"]
+    plain = CVAEPrior(PriorConfig(**{"embed_dim": 8, "hidden": 16, "latent_dim": 4}))
+    assert [type(m).__name__ for m in plain.decoder] == ["Linear", "ReLU", "Linear", "ReLU", "Linear"]
+    assert model.num_params() - plain.num_params() == 2 * 2 * (2 * 16)  # 4 norms, weight+bias

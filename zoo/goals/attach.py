@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from zoo.goals.embed import load_embedding_manifest, read_embedding_shard
-from zoo.goals.relabel import RelabelParams, episode_rng, relabel_episode
+from zoo.goals.relabel import RelabelParams, drop_sequence_goals, episode_rng, relabel_episode
 from zoo.data.sequences import read_shards
 
 GOAL_KEYS = ("goal", "goal_mask", "goal_step")
@@ -85,4 +85,21 @@ class GoalAttacher:
         return {"goal": goal, "goal_mask": labels.conditioned, "goal_step": labels.goal_step}
 
 
-__all__ = ["GOAL_KEYS", "GoalAttacher"]
+class SequenceGoalDrop:
+    """The stage after sequence packing that makes whole sequences unconditional (``uncond_per:
+    sequence``, STEVE-1's), seeded by (seed, epoch) like the relabelling."""
+
+    def __init__(self, uncond_prob: float) -> None:
+        self.uncond_prob = uncond_prob
+        self.seed = 0
+        self.epoch = 0
+
+    def start_epoch(self, seed: int, epoch: int) -> None:
+        self.seed, self.epoch = seed, epoch
+
+    def __call__(self, sequences: Iterable[dict]) -> Iterator[dict]:
+        for sequence in sequences:
+            yield drop_sequence_goals(sequence, self.uncond_prob, self.seed, self.epoch)
+
+
+__all__ = ["GOAL_KEYS", "GoalAttacher", "SequenceGoalDrop"]

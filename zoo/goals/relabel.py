@@ -18,12 +18,14 @@ Our reading of it, step by step, from the first step t of a piece:
    ``event_any``: the goal's segment is drawn uniformly from all segments reaching into the
    window, so an event also labels the steps that lead up to it (below);
 3. ``plain`` (and the fallback): the goal is drawn uniformly from the window (STEVE-1);
-4. every step t..g gets goal g; with probability ``uncond_prob`` the whole piece is
-   unconditional instead (classifier-free guidance needs the policy without a goal); the next
-   piece starts at g + 1.
+4. every step t..g gets goal g; the next piece starts at g + 1. With ``uncond_per: piece``
+   each piece is unconditional with probability ``uncond_prob`` (classifier-free guidance needs
+   the policy without a goal); with ``uncond_per: sequence`` (STEVE-1's: its data loader zeroes
+   a whole training chunk's goals) no piece is, and ``drop_sequence_goals`` zeroes whole
+   training sequences instead.
 Taking the *first* segment in the window is what keeps one goal from spanning two events: the
 steps before "place table" are labelled with the table, not with the pickaxe made just after.
-Its cost, measured (docs/results.md, C-Steve-1): "craft stone pickaxe" then labels only steps
+Its cost, measured (docs/results/csteve1.md, C-Steve-1): "craft stone pickaxe" then labels only steps
 where a table already stands, so the goal means "craft now" and a task that starts without a
 table is outside what it was trained on. ``event_any`` keeps goals inside event segments but
 lets the pickaxe also label the run-up that places the table.
@@ -40,6 +42,8 @@ import numpy as np
 
 RelabelMode = Literal["event", "event_any", "plain"]
 RELABEL_MODES: tuple[str, ...] = ("event", "event_any", "plain")
+UncondPer = Literal["piece", "sequence"]
+UNCOND_PER: tuple[str, ...] = ("piece", "sequence")
 NO_CAPTION = -1
 
 
@@ -55,7 +59,10 @@ class RelabelParams:
     max_gap: int = 10
     """Most steps a goal is ahead of the first step that gets it."""
     uncond_prob: float = 0.1
-    """Share of pieces trained without a goal (classifier-free guidance)."""
+    """Share of pieces (or sequences) trained without a goal (classifier-free guidance)."""
+    uncond_per: UncondPer = "piece"
+    """What ``uncond_prob`` draws: ``piece`` (each 1-10-step relabelled piece) or ``sequence``
+    (a whole training sequence, STEVE-1's)."""
 
     def __post_init__(self) -> None:
         if self.mode not in RELABEL_MODES:
@@ -66,6 +73,13 @@ class RelabelParams:
             )
         if not 0.0 <= self.uncond_prob <= 1.0:
             raise ValueError(f"uncond_prob={self.uncond_prob} must lie in [0, 1]")
+        if self.uncond_per not in UNCOND_PER:
+            raise ValueError(f"uncond_per={self.uncond_per!r}: expected one of {UNCOND_PER}")
+
+    @property
+    def piece_uncond_prob(self) -> float:
+        """The chance that one relabelled piece goes without a goal."""
+        return self.uncond_prob if self.uncond_per == "piece" else 0.0
 
 
 @dataclass
@@ -127,10 +141,27 @@ def relabel_episode(
         start, end = segment if segment is not None else (lo, hi)
         goal = int(rng.integers(start, end + 1))
         goal_step[t : goal + 1] = goal
-        conditioned[t : goal + 1] = rng.random() >= params.uncond_prob
+        conditioned[t : goal + 1] = rng.random() >= params.piece_uncond_prob
         from_event[t : goal + 1] = segment is not None
         t = goal + 1
     return Relabelling(goal_step, conditioned, from_event)
+
+
+def drop_sequence_goals(sequence: dict[str, np.ndarray], uncond_prob: float, seed: int,
+                        epoch: int) -> dict[str, np.ndarray]:
+    """``sequence`` with every goal zeroed and masked, with probability ``uncond_prob``.
+
+    The draw is a function of (seed, epoch, the sequence's first episode and step): the same
+    in any worker or rank that packs it.
+    """
+    start = [int(sequence["episode"][0]), int(sequence["step"][0])]
+    if np.random.default_rng([seed, epoch, *start, 0x0C06D]).random() >= uncond_prob:
+        return sequence
+    return {
+        **sequence,
+        "goal": np.zeros_like(sequence["goal"]),
+        "goal_mask": np.zeros_like(sequence["goal_mask"]),
+    }
 
 
 def episode_rng(seed: int, epoch: int, episode: int) -> np.random.Generator:
@@ -145,6 +176,9 @@ __all__ = [
     "RelabelMode",
     "RelabelParams",
     "Relabelling",
+    "UNCOND_PER",
+    "UncondPer",
+    "drop_sequence_goals",
     "episode_rng",
     "relabel_episode",
 ]

@@ -1,7 +1,7 @@
 """What each relabelling mode teaches: how many steps each caption's goal labels, and from how
 far ahead, over a ``zoo goals embed`` folder (its per-step captions; no model, no frames).
 
-The C-Steve-1 tables in docs/results.md trace a failed task back to the relabelling rule
+The C-Steve-1 tables in docs/results/csteve1.md trace a failed task back to the relabelling rule
 ("craft stone pickaxe" never labels a step before the table is placed); this measures that
 directly, for every mode of ``zoo.goals.relabel``, so a new rule can be checked before a
 23-minute training run:

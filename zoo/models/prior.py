@@ -39,6 +39,9 @@ class PriorConfig:
     """Width of the latent c."""
     kl_weight: float = 1.0
     """Weight of the KL term (1: the paper's ELBO; < 1 lets c carry more of z_v)."""
+    layer_norm: bool = False
+    """A LayerNorm after each hidden layer, before its ReLU, as Steve-1's prior has (the paper
+    config's choice; False: plain MLPs, as the shipped CPU prior was trained)."""
 
     def __post_init__(self) -> None:
         for name in ("embed_dim", "hidden", "latent_dim"):
@@ -54,13 +57,13 @@ class PriorConfig:
         return cls(**{k: v for k, v in hparams.items() if k in names})
 
 
-def mlp(width_in: int, hidden: int, width_out: int) -> nn.Sequential:
-    """Two hidden ReLU layers: the paper's "two-layer MLP"."""
-    return nn.Sequential(
-        nn.Linear(width_in, hidden), nn.ReLU(),
-        nn.Linear(hidden, hidden), nn.ReLU(),
-        nn.Linear(hidden, width_out),
-    )
+def mlp(width_in: int, hidden: int, width_out: int, layer_norm: bool = False) -> nn.Sequential:
+    """Two hidden ReLU layers: the paper's "two-layer MLP" (``layer_norm``: Steve-1's, with a
+    LayerNorm before each ReLU)."""
+    layers: list[nn.Module] = []
+    for width in (width_in, hidden):
+        layers += [nn.Linear(width, hidden), *([nn.LayerNorm(hidden)] if layer_norm else []), nn.ReLU()]
+    return nn.Sequential(*layers, nn.Linear(hidden, width_out))
 
 
 def gaussian_kl(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
@@ -74,8 +77,9 @@ class CVAEPrior(nn.Module):
     def __init__(self, config: PriorConfig) -> None:
         super().__init__()
         self.config = config
-        self.encoder = mlp(2 * config.embed_dim, config.hidden, 2 * config.latent_dim)
-        self.decoder = mlp(config.latent_dim + config.embed_dim, config.hidden, config.embed_dim)
+        norm = config.layer_norm
+        self.encoder = mlp(2 * config.embed_dim, config.hidden, 2 * config.latent_dim, norm)
+        self.decoder = mlp(config.latent_dim + config.embed_dim, config.hidden, config.embed_dim, norm)
 
     def num_params(self) -> int:
         return sum(p.numel() for p in self.parameters())

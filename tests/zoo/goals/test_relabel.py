@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from zoo.goals.relabel import NO_CAPTION, RelabelParams, episode_rng, relabel_episode
+from zoo.goals.relabel import (
+    NO_CAPTION,
+    RelabelParams,
+    drop_sequence_goals,
+    episode_rng,
+    relabel_episode,
+)
 
 
 def _pieces(goal_step: np.ndarray) -> list[tuple[int, int]]:
@@ -145,3 +151,35 @@ def test_bad_parameters_are_named() -> None:
         RelabelParams(mode="hindsight")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="uncond_prob"):
         RelabelParams(uncond_prob=1.5)
+
+
+def test_uncond_per_sequence_leaves_every_piece_conditioned() -> None:
+    """With STEVE-1's per-sequence dropping, relabelling itself drops no piece."""
+    captions = np.repeat(np.arange(40), 5)
+    params = RelabelParams(uncond_prob=1.0, uncond_per="sequence")
+    labels = relabel_episode(captions, params, np.random.default_rng(0))
+    assert labels.conditioned.all()
+    assert not relabel_episode(
+        captions, RelabelParams(uncond_prob=1.0), np.random.default_rng(0)
+    ).conditioned.any()
+
+
+def test_drop_sequence_goals_zeroes_whole_sequences_at_the_given_rate() -> None:
+    dropped = 0
+    for episode in range(2000):
+        sequence = {
+            "episode": np.full(8, episode), "step": np.arange(8) + 100,
+            "goal": np.ones((8, 4), np.float16), "goal_mask": np.ones(8, bool),
+        }
+        out = drop_sequence_goals(sequence, 0.1, seed=0, epoch=0)
+        assert out["goal_mask"].all() or not out["goal_mask"].any()  # all or nothing
+        assert (out["goal"] == 0).all() == (not out["goal_mask"].any())
+        dropped += not out["goal_mask"].any()
+        again = drop_sequence_goals(sequence, 0.1, seed=0, epoch=0)
+        assert (again["goal_mask"] == out["goal_mask"]).all()  # the draw is a function of its key
+    assert 150 < dropped < 250  # 10% of 2,000: 200 +- 3 sigma (sigma 13.4)
+
+
+def test_unknown_uncond_per_is_refused() -> None:
+    with pytest.raises(ValueError, match="uncond_per='episode'"):
+        RelabelParams(uncond_per="episode")  # type: ignore[arg-type]
