@@ -17,7 +17,7 @@ TOPS = ("zoo", "lit_models", "datamodules")
 
 # top (0) to bottom; a package's layer is the first entry that is a prefix of its module name
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("zoo.cli", "zoo.pipeline", "zoo.demo"),
+    ("zoo.cli", "zoo.pipeline"),
     ("lit_models", "datamodules"),
     ("zoo.eval", "zoo.rl"),
     ("zoo.agents",),
