@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from zoo.weights import load_model
+from zoo.agents.steve_agent import StevePolicy
+from zoo.weights import inference_settings, load_model
 from zoo.weights.export import CHECKSUM_FILE, exported_kind, verify_export
 
 WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
@@ -33,3 +34,12 @@ def test_shipped_folder_verifies_and_loads(folder: Path) -> None:
     assert not model.training
     floats = {v.dtype for v in model.state_dict().values() if v.is_floating_point()}
     assert floats == {torch.float32}  # half-precision files load as float32
+
+
+def test_shipped_c_steve_1_plays_at_the_scale_its_card_measured() -> None:
+    """Its card's tables are at guidance 0.5 and temperature 1; config.json records both, so
+    loading without arguments plays as measured (the paper's 1.5 is for exports without it)."""
+    folder = WEIGHTS / "csteve1_cpu"
+    assert inference_settings(folder, "csteve1") == {"cfg_scale": 0.5, "temperature": 1.0}
+    policy = StevePolicy.load(folder)
+    assert (policy.cfg_scale, policy.temperature, policy.greedy) == (0.5, 1.0, False)

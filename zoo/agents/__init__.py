@@ -15,7 +15,8 @@ from pathlib import Path
 from zoo.agents.base import Agent, RandomAgent
 
 Factory = Callable[..., Agent]
-"""``factory(checkpoint, num_envs, temperature, greedy, **options) -> Agent``."""
+"""``factory(checkpoint, num_envs, temperature, greedy, **options) -> Agent``; ``temperature`` is
+None only for C-Steve-1 (the one its export records)."""
 
 
 def _random(checkpoint, num_envs: int, temperature: float, greedy: bool, **options) -> Agent:
@@ -41,8 +42,8 @@ def _cvpt(checkpoint: str, num_envs: int, temperature: float, greedy: bool, **op
     return CVPTAgent.from_checkpoint(checkpoint, num_envs, temperature=temperature, greedy=greedy)
 
 
-def _csteve1(checkpoint: str, num_envs: int, temperature: float, greedy: bool,
-             cclip: str | None = None, prior: str | None = None, cfg_scale: float = 1.5,
+def _csteve1(checkpoint: str, num_envs: int, temperature: float | None, greedy: bool,
+             cclip: str | None = None, prior: str | None = None, cfg_scale: float | None = None,
              **options) -> Agent:
     from zoo.agents.steve_agent import GoalEncoder, SteveAgent, StevePolicy
 
@@ -86,26 +87,27 @@ def make_agent(
     name: str,
     num_envs: int,
     checkpoint: str | None = None,
-    temperature: float = 1.0,
+    temperature: float | None = None,
     cclip: str | None = None,
     prior: str | None = None,
-    cfg_scale: float = 1.5,
+    cfg_scale: float | None = None,
     expert_options: dict | None = None,
 ) -> Agent:
     """Build the named agent for ``num_envs`` envs; ``checkpoint`` is required by trained ones.
 
     ``temperature`` scales a sampling policy's logits (C-VPT, C-Steve-1, RL); 0 plays the most
-    likely action. C-Steve-1 reads text instructions through ``cclip`` (its C-CLIP checkpoint)
-    and ``prior`` (the CVAE prior's), and guides with ``cfg_scale`` (paper: 1.5).
+    likely action; None is 1, or for C-Steve-1 what its export records. C-Steve-1 reads text
+    instructions through ``cclip`` (its C-CLIP checkpoint) and ``prior`` (the CVAE prior's), and
+    guides with ``cfg_scale`` (None: the scale its export records, else the paper's 1.5).
     ``expert_options`` overrides the scripted expert's ``ExpertConfig`` fields.
     """
     if name not in FACTORIES:
         raise ValueError(f"unknown agent {name!r}; expected one of {AGENT_NAMES}")
     if expert_options and name != "scripted":
         raise ValueError(f"expert options apply to the scripted expert only, not {name!r}")
-    if temperature < 0:
+    if temperature is not None and temperature < 0:
         raise ValueError(f"temperature must be >= 0, got {temperature}")
-    if temperature != 1.0 and name not in SAMPLING:
+    if temperature not in (None, 1.0) and name not in SAMPLING:
         raise ValueError(
             f"temperature applies to the {', '.join(SAMPLING[:-1])} and {SAMPLING[-1]} agents "
             f"only, not {name!r}"
@@ -113,6 +115,8 @@ def make_agent(
     if name in CHECKPOINTS and checkpoint is None:
         raise ValueError(f"agent {name!r} needs --checkpoint PATH ({CHECKPOINTS[name]})")
     greedy = temperature == 0
+    if temperature is None and name != "csteve1":  # only C-Steve-1 exports record one
+        temperature = 1.0
     options = {"cclip": cclip, "prior": prior, "cfg_scale": cfg_scale} if name == "csteve1" else {}
     if name == "scripted":
         options["expert_options"] = expert_options
@@ -181,7 +185,7 @@ def checkpoint_kind(path: str | Path) -> str:
 
 
 def load_checkpoint_agent(
-    path: str | Path, num_envs: int, temperature: float = 1.0, **options
+    path: str | Path, num_envs: int, temperature: float | None = None, **options
 ) -> Agent:
     """The trained agent stored at ``path`` (see ``checkpoint_kind``), for ``num_envs`` envs;
     ``options`` are ``make_agent``'s C-Steve-1 arguments (cclip, prior, cfg_scale)."""

@@ -4,7 +4,8 @@
   prior, paper §4.3 "Inference"), from a caption id (its caption text, the same way), or from a
   6-frame video clip (C-CLIP video tower, what training used).
 - ``StevePolicy``: ``initial_state(n)`` and ``act(frames, goals, state)``, one frame per env per
-  call with cached TrXL memory, classifier-free guidance with scale ``cfg_scale`` (paper: 1.5).
+  call with cached TrXL memory, classifier-free guidance with scale ``cfg_scale``; ``load``
+  plays at the scale and temperature its export records, else the paper's 1.5 and 1.
 - ``instruction_note``: for an instruction that is not a caption, the caption C-CLIP finds
   nearest (free text is allowed; the note says what it resembles).
 - ``SteveAgent``: an ``InstructableAgent`` for ``zoo eval``/``zoo play`` (``instruct`` sets an
@@ -21,13 +22,13 @@ import torch
 from torch.nn import functional as F
 
 from zoo.agents.base import EpisodeStreams
-from zoo.models.sampling import sample_actions
 from zoo.envs.base import Step
 from zoo.models.cclip import CCLIPModel
 from zoo.models.prior import CVAEPrior
+from zoo.models.sampling import sample_actions
 from zoo.models.steve import SteveModel
 from zoo.models.trxl import TrXLState
-from zoo.weights import load_model
+from zoo.weights import inference_settings, load_model
 
 
 def is_steve_checkpoint(checkpoint: dict) -> bool:
@@ -138,8 +139,25 @@ class StevePolicy:
         self._rng = np.random.default_rng(seed)
 
     @classmethod
-    def load(cls, path: str | Path, device: str = "cpu", **kwargs) -> StevePolicy:
-        return cls(load_model(path, "csteve1"), device, **kwargs)
+    def load(
+        cls,
+        path: str | Path,
+        device: str | torch.device = "cpu",
+        cfg_scale: float | None = None,
+        temperature: float | None = None,
+        greedy: bool = False,
+        seed: int = 0,
+    ) -> StevePolicy:
+        """The C-Steve-1 at ``path`` (export folder or ``.ckpt``). ``cfg_scale`` and
+        ``temperature`` left None are what its export records (the settings its scores were
+        measured at, ``zoo export --cfg-scale``), else the paper's 1.5 and 1; a temperature of
+        0 plays the most likely action."""
+        model = load_model(path, "csteve1")  # checks an export's sums before its config is read
+        recorded = inference_settings(path, "csteve1")
+        cfg_scale = recorded["cfg_scale"] if cfg_scale is None else cfg_scale
+        temperature = recorded["temperature"] if temperature is None else temperature
+        greedy = greedy or temperature == 0
+        return cls(model, device, cfg_scale, 1.0 if greedy else temperature, greedy, seed)
 
     @property
     def goal_dim(self) -> int:
@@ -248,6 +266,13 @@ class SteveAgent:
         self._seeds = np.zeros(num_envs, dtype=np.int64)
         self._goal = torch.zeros(num_envs, policy.goal_dim)
         self.instructions: list[str | None] = [None] * num_envs
+
+    @property
+    def inference(self) -> dict[str, float]:
+        """The guidance scale and temperature it plays at (0: the most likely action), as
+        resolved from its export or given: what a report records."""
+        temperature = 0.0 if self.policy.greedy else self.policy.temperature
+        return {"cfg_scale": self.policy.cfg_scale, "temperature": temperature}
 
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> None:
         """New episodes where ``mask``: fresh memory, and the current instruction's goal is

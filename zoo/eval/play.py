@@ -68,6 +68,15 @@ def play_episode(
     }
 
 
+def inference_meta(agent, temperature: float | None) -> dict[str, float]:
+    """How ``agent`` chose its actions, for a report: a C-Steve-1's guidance scale and
+    temperature as it resolved them (its export's unless given), else the temperature asked
+    for (1 if none)."""
+    return getattr(agent, "inference", None) or {
+        "temperature": 1.0 if temperature is None else temperature
+    }
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "play",
@@ -90,9 +99,15 @@ def register(subparsers) -> None:
     )
     p.add_argument("--prior", default=None, help="CVAE prior .ckpt (text goals)")
     p.add_argument(
-        "--cfg-scale", type=float, default=1.5, help="classifier-free guidance (paper 1.5)"
+        "--cfg-scale", type=float,
+        help="classifier-free guidance scale (default: the scale its export records, else the "
+        "paper's 1.5)",
     )
-    p.add_argument("--temperature", type=float, default=1.0, help="0: most likely action")
+    p.add_argument(
+        "--temperature", type=float,
+        help="sampling temperature (default 1, or the one a C-Steve-1 export records); 0: the "
+        "most likely action",
+    )
     p.add_argument("--env", choices=("craftax", "crafter"), default="craftax")
     p.add_argument("--seed", type=int, default=0, help="episode seed (episode 0 of this seed)")
     p.add_argument("--max-steps", type=int, default=500)
@@ -137,7 +152,7 @@ def run_play(args: argparse.Namespace) -> int:
         "checkpoint": str(args.checkpoint),
         "env": args.env,
         "seed": args.seed,
-        "cfg_scale": args.cfg_scale if kind == "csteve1" else None,
+        **inference_meta(agent, args.temperature),
         "steps": len(result["actions"]),
         "survived": result["survived"],
         "unlocked": result["unlocked"],
@@ -148,4 +163,4 @@ def run_play(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["caption_frames", "play_episode", "register", "run_play"]
+__all__ = ["caption_frames", "inference_meta", "play_episode", "register", "run_play"]

@@ -55,7 +55,7 @@ class Setting:
     episodes: int
     seed: int
     num_envs: int
-    temperature: float
+    temperature: float | None  # None: 1, or what the C-Steve-1 export records
     csteve1: Path | None = None
     cclip: Path | None = None
     prior: Path | None = None
@@ -65,8 +65,9 @@ class Setting:
         """Envs played at once: never more than there are episodes."""
         return min(self.num_envs, self.episodes)
 
-    def steve(self, cfg_scale: float) -> Agent:
-        """C-Steve-1 reading text instructions through its C-CLIP and prior."""
+    def steve(self, cfg_scale: float | None) -> Agent:
+        """C-Steve-1 reading text instructions through its C-CLIP and prior (``cfg_scale``
+        None: the scale its export records)."""
         return make_agent(
             "csteve1", self.batch, str(self.csteve1), self.temperature, cclip=str(self.cclip),
             prior=str(self.prior), cfg_scale=cfg_scale,
@@ -89,12 +90,17 @@ class Setting:
             "instructions": list(TASKS[task].instructions), "seed": self.seed,
             "max_steps": TASKS[task].max_steps, "seconds": time.perf_counter() - start,
             "instruction_mode": "single instruction" if instruction else "none",
+            **getattr(agent, "inference", {}),  # C-Steve-1's scale and temperature as played
         }
         return write_task_report(results, rollouts, out, meta)
 
 
 def table(
-    setting: Setting, tasks: list[str], rows: list[str], cvpt: Path | None, cfg_scale: float
+    setting: Setting,
+    tasks: list[str],
+    rows: list[str],
+    cvpt: Path | None,
+    cfg_scale: float | None,
 ) -> list[dict]:
     """The ``rows`` of each task in each game (``rows`` from TABLE_ROWS; the cvpt row needs
     ``cvpt``, the C-Steve-1 rows the setting's checkpoints)."""

@@ -2,21 +2,22 @@
 
 ``load_model(path, kind=None)`` rebuilds any of the four networks (C-VPT, C-CLIP, the CVAE
 prior, C-Steve-1) without Lightning from a ``zoo fit`` ``.ckpt`` or a ``zoo export`` folder
-(``zoo/weights/export.py``: the kinds registry, export, checksums); ``checkpoint_io`` reads
-torch files weights-only with errors that name the file. ``CVPTPolicy.load`` and
-``StevePolicy.load`` wrap ``load_model`` for acting. Imported lazily: ``zoo --help`` must not
-load torch.
+(``zoo/weights/export.py``: the kinds registry, export, checksums); ``inference_settings``
+says what a model plays with beyond its weights (C-Steve-1's guidance scale and temperature, as
+its export records them); ``checkpoint_io`` reads torch files weights-only with errors that name
+the file. ``CVPTPolicy.load`` wraps ``load_model`` for acting, ``StevePolicy.load`` both.
+Imported lazily: ``zoo --help`` must not load torch.
 """
 
 from __future__ import annotations
 
 
 def __getattr__(name: str):
-    if name == "load_model":
-        from zoo.weights.export import load_model
+    if name in __all__:
+        from zoo.weights import export
 
-        return load_model
+        return getattr(export, name)
     raise AttributeError(f"module 'zoo.weights' has no attribute {name!r}")
 
 
-__all__ = ["load_model"]
+__all__ = ["inference_settings", "load_model"]

@@ -1,6 +1,8 @@
 """`zoo export --checkpoint CKPT --out DIR`: any model's Lightning checkpoint to an export folder.
 
 The kind (C-VPT, C-CLIP, CVAE prior, C-Steve-1) comes from the checkpoint's hyper-parameters.
+For C-Steve-1, `--cfg-scale`/`--temperature` record the settings its scores were measured at, so
+`zoo play`, `zoo eval` and `StevePolicy.load` play at them unless told otherwise.
 The older positional form `zoo export CKPT DIR` still works (docs and scripts use it).
 """
 
@@ -24,13 +26,19 @@ def _export(args: argparse.Namespace) -> int:
     from zoo.weights.export import (  # torch loads only when exporting
         export_checkpoint,
         exported_kind,
+        inference_settings,
     )
 
+    given = {"cfg_scale": args.cfg_scale, "temperature": args.temperature}
     try:
-        path = export_checkpoint(checkpoint, out, args.dtype)
+        path = export_checkpoint(
+            checkpoint, out, args.dtype, {k: v for k, v in given.items() if v is not None}
+        )
     except (FileNotFoundError, ValueError) as err:
         return _fail(str(err))
-    print(f"exported {exported_kind(path)} {checkpoint} -> {path} ({args.dtype})")
+    kind = exported_kind(path)
+    settings = "".join(f", {k} {v:g}" for k, v in inference_settings(path, kind).items())
+    print(f"exported {kind} {checkpoint} -> {path} ({args.dtype}{settings})")
     return 0
 
 
@@ -52,6 +60,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--dtype", choices=DTYPE_CHOICES, default="float32",
         help="how weights are stored; loading always gives float32 (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--cfg-scale", type=float, metavar="X",
+        help="C-Steve-1: the classifier-free guidance scale its scores were measured at, "
+        "recorded in config.json as what it plays at (default: the paper's 1.5)",
+    )
+    parser.add_argument(
+        "--temperature", type=float, metavar="T",
+        help="C-Steve-1: the sampling temperature its scores were measured at, recorded the "
+        "same way (default 1; 0: the most likely action)",
     )
     parser.add_argument(
         "paths", nargs="*", metavar="CKPT OUT", help="the same two paths, positionally"

@@ -1,18 +1,21 @@
 """Trained networks without Lightning: read .ckpt files, write/read export folders.
 
 An export folder holds ``model.safetensors``, ``config.json`` (the network's config plus
-``"kind"``: cvpt, cclip, prior or csteve1, and the stored ``"dtype"``) and ``sha256.txt``
-(``sha256sum`` format, so ``sha256sum -c sha256.txt`` also checks it). Every model uses this
-one format and one checksum routine; a ``ModelKind`` only says how a training run's
-hyper-parameters become a config and a config a network. A C-VPT export written before kinds
-existed has no ``"kind"`` and reads as cvpt. Weights may be stored as float16/bfloat16 to halve
-the bytes; loading always gives float32 modules.
+``"kind"``: cvpt, cclip, prior or csteve1, the stored ``"dtype"`` and, for a kind that plays with
+settings its weights do not hold, ``"inference"``: C-Steve-1's guidance scale and temperature,
+the ones its scores were measured at) and ``sha256.txt`` (``sha256sum`` format, so
+``sha256sum -c sha256.txt`` also checks it). Every model uses this one format and one checksum
+routine; a ``ModelKind`` only says how a training run's hyper-parameters become a config and a
+config a network. A C-VPT export written before kinds existed has no ``"kind"`` and reads as
+cvpt; a C-Steve-1 export written before ``"inference"`` plays at the defaults. Weights may be
+stored as float16/bfloat16 to halve the bytes; loading always gives float32 modules.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -31,7 +34,8 @@ CONFIG_FILE = "config.json"
 CHECKSUM_FILE = "sha256.txt"
 STATE_DICT_PREFIX = "model."  # every lit_models module keeps its network in ``self.model``
 DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
-RESERVED_KEYS = ("kind", "dtype")  # config.json keys that are not config fields
+INFERENCE = "inference"
+RESERVED_KEYS = ("kind", "dtype", INFERENCE)  # config.json keys that are not config fields
 
 
 def config_from_hparams(hparams: dict[str, Any]) -> CVPTConfig:
@@ -112,6 +116,9 @@ class ModelKind:
     config_from_hparams: Callable[[dict[str, Any]], dict[str, Any]]
     build: Callable[[dict[str, Any]], nn.Module]
     config_of: Callable[[nn.Module], dict[str, Any]]
+    inference: dict[str, float] = dataclasses.field(default_factory=dict)
+    """Settings it plays with that its weights do not hold, with the values used where an
+    export records none (a ``.ckpt``, an export from before they were recorded)."""
 
 
 KINDS: dict[str, ModelKind] = {
@@ -132,6 +139,7 @@ KINDS: dict[str, ModelKind] = {
     "csteve1": ModelKind(
         "C-Steve-1", "lit_models.csteve1.CSteve1", "zoo.models.steve.SteveModel",
         "backbone_config", _steve_config, _steve_build, _steve_config_of,
+        {"cfg_scale": 1.5, "temperature": 1.0},  # the paper's guidance scale; plain sampling
     ),
 }
 
@@ -202,12 +210,18 @@ def checkpoint_sha256(path: str | Path) -> str:
     return sha256_file(path / CHECKSUM_FILE if path.is_dir() else path)
 
 
-def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path, dtype: str = "float32") -> Path:
-    """Write the network of any model's Lightning checkpoint as an export folder."""
+def export_checkpoint(
+    ckpt_path: str | Path,
+    out_dir: str | Path,
+    dtype: str = "float32",
+    inference: dict[str, float] | None = None,
+) -> Path:
+    """Write the network of any model's Lightning checkpoint as an export folder
+    (``inference``: as for ``save_exported``)."""
     # building here makes weights and config that disagree fail now, not at load time
     parts = read_lightning_checkpoint(ckpt_path, expected="a `zoo fit` checkpoint (.ckpt)")
     network = _build(*parts)
-    return save_exported(network, out_dir, dtype)
+    return save_exported(network, out_dir, dtype, inference)
 
 
 def _kind_of_model(model: nn.Module) -> str:
@@ -219,14 +233,23 @@ def _kind_of_model(model: nn.Module) -> str:
                     f"{[kind.model_class for kind in KINDS.values()]}")
 
 
-def save_exported(model: nn.Module, out_dir: str | Path, dtype: str = "float32") -> Path:
+def save_exported(
+    model: nn.Module,
+    out_dir: str | Path,
+    dtype: str = "float32",
+    inference: dict[str, float] | None = None,
+) -> Path:
     """Write a network as safetensors + config + checksums (what ``load_model`` reads).
 
     ``dtype`` (float32, float16, bfloat16) is how floating-point weights are stored.
+    ``inference`` overrides the kind's play settings (C-Steve-1: ``cfg_scale``, ``temperature``)
+    with the ones its scores were measured at; config.json records all of them, so the export
+    plays the same even if the defaults change.
     """
     if dtype not in DTYPES:
         raise ValueError(f"dtype {dtype!r}: expected one of {sorted(DTYPES)}")
     kind = _kind_of_model(model)
+    settings = {**KINDS[kind].inference, **_checked_inference(kind, inference or {})}
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     weights = {
@@ -234,7 +257,10 @@ def save_exported(model: nn.Module, out_dir: str | Path, dtype: str = "float32")
         for key, value in model.state_dict().items()
     }
     save_file(weights, out / WEIGHTS_FILE)
-    config = {"kind": kind, "dtype": dtype, **KINDS[kind].config_of(model)}
+    config: dict[str, Any] = {"kind": kind, "dtype": dtype}
+    if settings:
+        config[INFERENCE] = settings
+    config.update(KINDS[kind].config_of(model))
     (out / CONFIG_FILE).write_text(json.dumps(config, indent=2) + "\n")
     lines = [f"{sha256_file(out / name)}  {name}\n" for name in (WEIGHTS_FILE, CONFIG_FILE)]
     (out / CHECKSUM_FILE).write_text("".join(lines))
@@ -290,6 +316,38 @@ def exported_kind(out_dir: str | Path) -> str:
         path = Path(out_dir) / CONFIG_FILE
         raise CheckpointError(f"{path}: unknown kind {kind!r}, expected one of {sorted(KINDS)}")
     return kind
+
+
+def _checked_inference(kind: str, settings: dict[str, Any]) -> dict[str, float]:
+    """``settings`` if ``kind`` plays with each of them and each is a number >= 0 (a guidance
+    scale, 0: the conditional logits alone; a temperature, 0: the most likely action); else a
+    ValueError."""
+    allowed = KINDS[kind].inference
+    unknown = sorted(set(settings) - set(allowed))
+    if unknown:
+        raise ValueError(f"a {KINDS[kind].title} export records no {unknown}: "
+                         f"its inference settings are {sorted(allowed) or 'none'}")
+    bad = {name: value for name, value in settings.items()
+           if isinstance(value, bool) or not isinstance(value, int | float)
+           or not (math.isfinite(value) and value >= 0)}
+    if bad:
+        raise ValueError(f"inference settings must be finite numbers >= 0, got {bad}")
+    return settings
+
+
+def inference_settings(path: str | Path, kind: str) -> dict[str, float]:
+    """The settings the ``kind`` model at ``path`` plays with: what a ``zoo export`` folder's
+    config.json records, else the kind's defaults (a ``.ckpt``, an older export)."""
+    path = Path(path)
+    recorded = read_export_config(path).get(INFERENCE, {}) if path.is_dir() else {}
+    if not isinstance(recorded, dict):
+        raise CheckpointError(f"{path / CONFIG_FILE}: {INFERENCE!r} holds a JSON "
+                              f"{type(recorded).__name__}, expected an object")
+    try:
+        checked = _checked_inference(kind, recorded)
+    except ValueError as err:
+        raise CheckpointError(f"{path / CONFIG_FILE}: {err}") from None
+    return {**KINDS[kind].inference, **checked}
 
 
 def _load_exported(out_dir: str | Path, kind: str | None) -> nn.Module:

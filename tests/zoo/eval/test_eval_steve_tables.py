@@ -48,7 +48,8 @@ def test_the_protocols_parse_with_the_docs_flags() -> None:
     assert plain.protocol is None and plain.env == "crafter" and plain.handler is not table.handler
     defaults = parser.parse_args(["eval", "task-table", "--out", "o"])
     assert (defaults.env, defaults.episodes, defaults.num_envs) == (["craftax", "crafter"], 100, 20)
-    assert (defaults.seed, defaults.cfg_scale, defaults.temperature) == (0, 1.5, 1.0)
+    # None: what the C-Steve-1 export records (else 1.5 and 1)
+    assert (defaults.seed, defaults.cfg_scale, defaults.temperature) == (0, None, None)
     assert defaults.rows == list(steve_tables.TABLE_ROWS)
 
 
@@ -96,7 +97,8 @@ def test_sweep_and_goal_check_require_their_checkpoints(
 
 @pytest.fixture(scope="module")
 def tiny_models(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """Random exports of the four networks the protocol loads, small enough to play fast."""
+    """Random exports of the four networks the protocol loads, small enough to play fast; the
+    C-Steve-1 records guidance scale 0.7, which its rows play at unless given another."""
     from zoo.envs.constants import NUM_ACTIONS
     from zoo.models.cclip import build_cclip
     from zoo.models.cvpt import CVPTConfig, CVPTModel
@@ -116,7 +118,9 @@ def tiny_models(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         "cclip": build_cclip("smoke", vision_layers=1, text_layers=1),
         "prior": CVAEPrior(PriorConfig(embed_dim=64, hidden=16, latent_dim=4)),
     }
-    return paths | {name: save_exported(model, root / name) for name, model in models.items()}
+    inference = {"csteve1": {"cfg_scale": 0.7}}
+    return paths | {name: save_exported(model, root / name, inference=inference.get(name))
+                    for name, model in models.items()}
 
 
 def test_task_table_writes_its_cells_and_summary_and_a_rerun_skips_them(
@@ -134,6 +138,8 @@ def test_task_table_writes_its_cells_and_summary_and_a_rerun_skips_them(
         report = json.loads((tmp_path / "crafter" / "collect_sapling" / row / "report.json")
                             .read_text())
         assert report["episodes"] == 2 and report["agent"] == row
+        played_at = {"cfg_scale": 0.7, "temperature": 1.0} if row in steve_tables.STEVE_ROWS else {}
+        assert {k: report[k] for k in ("cfg_scale", "temperature") if k in report} == played_at
     table = (tmp_path / "summary_table.md").read_text()
     assert table.startswith(steve_tables.SUMMARY_HEADER)
     assert "crafter: C-Steve-1 ahead of C-VPT on" in table and "of 1 tasks" in table
