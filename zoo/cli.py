@@ -28,6 +28,7 @@ TOP_LEVEL = (
     ("zoo.eval.play", "register"),
     ("zoo.rl.cli", "register"),
     ("zoo.pipeline", "register"),
+    ("lit_models.scale.cli", "register"),
 )
 
 
