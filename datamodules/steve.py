@@ -5,7 +5,10 @@ unchanged, with one more per-step input: each chunk is read together with its ``
 embed`` shard and relabelled (``zoo.goals.attach.GoalAttacher``, ``zoo.goals.relabel``). Batches
 are {frames, actions, first, episode, step} as for C-VPT plus goal float16 (B, S, D),
 goal_mask bool (B, S) (False on unconditional pieces or sequences, whose goal is zeros) and goal_step int64
-(B, S) (the episode step whose clip is the goal).
+(B, S) (the episode step whose clip is the goal, -1 for a caption's embedding).
+
+On goal-directed CrafterPlay (``zoo data generate --instructions``) the goals can instead be the
+instructions the expert was commanded, or a mix of both (``goal_source``; ``zoo.goals.sources``).
 
 Training goals are redrawn every epoch from (seed, epoch, episode); validation and test goals
 are those of epoch 0, so their losses are comparable across a run.
@@ -17,10 +20,12 @@ import warnings
 from collections.abc import Callable, Iterable, Iterator
 
 from datamodules.crafterplay import CrafterPlayDataModule
-from zoo.goals.embed import check_embeddings_match, load_embedding_manifest
-from zoo.goals.attach import GOAL_KEYS, GoalAttacher, SequenceGoalDrop
-from zoo.goals.relabel import RelabelMode, RelabelParams, UncondPer
+from zoo.data.manifest import require_manifest
 from zoo.data.sequences import ShardSources
+from zoo.goals.attach import GOAL_KEYS, GoalAttacher, SequenceGoalDrop
+from zoo.goals.embed import check_embeddings_match, load_embedding_manifest
+from zoo.goals.relabel import RelabelMode, RelabelParams, UncondPer
+from zoo.goals.sources import CommandedGoal, GoalSource, GoalSourceParams, caption_goals
 
 
 class SteveDataModule(CrafterPlayDataModule):
@@ -37,6 +42,9 @@ class SteveDataModule(CrafterPlayDataModule):
         max_gap: int = 10,
         uncond_prob: float = 0.1,
         uncond_per: UncondPer = "piece",
+        goal_source: GoalSource = "hindsight",
+        commanded_weight: float = 0.5,
+        commanded_goal: CommandedGoal = "caption",
         partial_embeddings: bool = False,
         seq_len: int = 640,
         batch_size: int = 128,
@@ -66,6 +74,13 @@ class SteveDataModule(CrafterPlayDataModule):
         uncond_per: ``sequence``: ``uncond_prob`` zeroes a whole training sequence's goals
             (STEVE-1's, which the paper's C-Steve-1 follows; configs/csteve1.yaml); ``piece``:
             each relabelled piece of 1-10 steps (how the shipped CPU C-Steve-1 was trained).
+        goal_source: ``hindsight`` (the paper's relabelling), ``commanded`` (the instruction the
+            expert was pursuing at each step; goal-directed data only) or ``mix`` (per
+            instruction segment, commanded with probability ``commanded_weight``).
+        commanded_weight: ``mix``: the share of instruction segments with commanded goals.
+        commanded_goal: a commanded goal is the ``caption``'s embedding (the mean C-CLIP
+            embedding of its clips in ``embeddings``) or the ``completion`` clip's (the step that
+            completed the instruction; segments that did not complete keep hindsight goals).
         partial_embeddings: train on the CrafterPlay shards that ``embeddings`` covers (a
             ``zoo goals embed --shards A:B`` run) instead of refusing an incomplete folder.
         seq_len: steps per sequence (paper: 640).
@@ -100,7 +115,9 @@ class SteveDataModule(CrafterPlayDataModule):
         )
         self.save_hyperparameters()  # after the parent's: this subclass's arguments win
         self.relabel_params = RelabelParams(relabel, min_gap, max_gap, uncond_prob, uncond_per)
+        self.goal_sources = GoalSourceParams(goal_source, commanded_weight, commanded_goal)
         self._embeddings_checked = False
+        self._caption_goals: dict | None = None
 
     @property
     def shards(self) -> ShardSources:
@@ -130,7 +147,26 @@ class SteveDataModule(CrafterPlayDataModule):
                 self.hparams.embeddings, self.hparams.root, self.hparams.partial_embeddings
             )
             self._embeddings_checked = True
-        return GoalAttacher(self.hparams.embeddings, self.relabel_params, self.hparams.skip_corrupt)
+        return GoalAttacher(
+            self.hparams.embeddings, self.relabel_params, self.hparams.skip_corrupt,
+            self.goal_sources, self._commanded_caption_goals(),
+        )
+
+    def _commanded_caption_goals(self) -> dict | None:
+        """The caption embeddings commanded goals need (None: they need none); refuses data
+        that was not generated goal-directed."""
+        sources = self.goal_sources
+        if sources.source == "hindsight":
+            return None
+        if require_manifest(self.hparams.root)["config"].get("instructions") is None:
+            raise ValueError(
+                f"goal_source={sources.source!r} needs goal-directed CrafterPlay, but "
+                f"{self.hparams.root} was generated without instructions (zoo data generate "
+                "--instructions); use goal_source: hindsight"
+            )
+        if sources.commanded_goal == "caption" and self._caption_goals is None:
+            self._caption_goals = caption_goals(self.hparams.embeddings)
+        return self._caption_goals
 
     def sequence_stages(self) -> list[Callable[[Iterable[dict]], Iterator[dict]]]:
         if self.relabel_params.uncond_per == "sequence":

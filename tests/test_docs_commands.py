@@ -24,7 +24,8 @@ from zoo.cli import TRAIN_VERBS, build_parser
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
-SHELL_BLOCK = re.compile(r"^```(?:bash|sh|console)?\n(.*?)^```", re.DOTALL | re.MULTILINE)
+FENCE = re.compile(r"^```(\S*)[^\n]*\n(.*?)^```[ \t]*$", re.DOTALL | re.MULTILINE)
+SHELL_LANGUAGES = ("", "bash", "sh", "shell", "console")
 # values for one-letter/upper-case placeholders that follow a flag in the docs
 PLACEHOLDERS = {"E": "craftax", "G": "craftax", "GAME": "craftax", "S": "0", "N": "1"}
 # argparse types that check a path exist; the docs' paths are made by earlier commands
@@ -33,14 +34,25 @@ MISSING_PATH = re.compile(
 )
 
 
+SHELL_ARITHMETIC = re.compile(r"\$\(\(([0-9a-zA-Z_+*/ -]+)\)\)")
+
+
+def _arithmetic(match: re.Match) -> str:
+    """A shell ``$((10*k+10))`` as the value it takes with every variable at 1 (a SLURM
+    array task), so the flag's own check sees a number."""
+    return str(eval(re.sub(r"[A-Za-z_]\w*", "1", match.group(1))))  # digits and + - * / only
+
+
 def doc_commands() -> list[tuple[str, list[str]]]:
     """(file:line, argv after `zoo`) for each `zoo` command in the docs' shell blocks."""
     found = []
     for path in DOCS:
         text = path.read_text()
-        for block in SHELL_BLOCK.finditer(text):
-            first_line = text.count("\n", 0, block.start(1)) + 1
-            lines = block.group(1).split("\n")
+        for block in FENCE.finditer(text):  # fences pair in order: a python block is skipped
+            if block.group(1) not in SHELL_LANGUAGES:
+                continue
+            first_line = text.count("\n", 0, block.start(2)) + 1
+            lines = block.group(2).split("\n")
             i = 0
             while i < len(lines):
                 start, command = i, lines[i]
@@ -51,7 +63,7 @@ def doc_commands() -> list[tuple[str, list[str]]]:
                 match = re.match(r"\s*(?:\$ )?(?:\w+=\S+ )*(?:\.venv/bin/)?zoo (.*)", command)
                 if not match:
                     continue
-                argv = shlex.split(match.group(1), comments=True)
+                argv = shlex.split(SHELL_ARITHMETIC.sub(_arithmetic, match.group(1)), comments=True)
                 argv = [PLACEHOLDERS.get(a, a) if j and argv[j - 1].startswith("--") else a
                         for j, a in enumerate(argv)]
                 found.append((f"{path.relative_to(ROOT)}:{first_line + start}", argv))

@@ -12,6 +12,7 @@ from pathlib import Path
 from zoo.agents import AGENT_NAMES
 from zoo.argtypes import existing_dir, out_dir, positive_int, shard_range
 from zoo.envs import ENV_NAMES
+from zoo.envs.tasks.starts import START_STATES
 
 
 def _expert_option(text: str) -> tuple[str, object]:
@@ -56,6 +57,16 @@ def register(subparsers) -> None:
                      metavar="KEY=VALUE",
                      help="override a scripted-expert tunable (zoo/experts/scripted/config.py), "
                      "e.g. plants_first=true; repeatable; recorded in the manifest")
+    gen.add_argument("--instructions", metavar="captions|subgoals|FILE",
+                     help="goal-directed play: tell the scripted expert one caption after another, "
+                     "drawn from captions (all it follows), subgoals (the task suites' sub-goals) "
+                     "or FILE (one caption per line); every step records its caption id")
+    gen.add_argument("--instruction-timeout", type=positive_int, default=300, metavar="N",
+                     help="actions spent on an instruction before the next is drawn "
+                     "(with --instructions)")
+    gen.add_argument("--start-states", choices=START_STATES, default="default",
+                     help="default: the game's start; tasks: each episode starts with one of the "
+                     "task suites' starting inventories (drawn from its seed)")
     _add_play_args(gen)
     gen.set_defaults(handler=_generate, _parser=gen)
 
@@ -146,12 +157,23 @@ def _generate(args) -> int:
         args._parser.error("--expert ppo needs --checkpoint PATH")
     if args.expert_option and args.expert != "scripted":
         args._parser.error(f"--expert-option applies to --expert scripted, not {args.expert}")
+    if args.instructions is not None and args.expert != "scripted":
+        args._parser.error(f"--instructions needs --expert scripted, not {args.expert}")
     _check_frames(args)
+    instructions = None
+    if args.instructions is not None:
+        from zoo.agents.instructions import instruction_schedule
+
+        try:
+            instructions = instruction_schedule(args.instructions, args.instruction_timeout)
+        except ValueError as err:
+            args._parser.error(f"--instructions: {err}")
     config = GenerationConfig(
         expert=args.expert, checkpoint=checkpoint, episodes=args.episodes, seed=args.seed,
         env=args.env, episodes_per_shard=args.episodes_per_shard,
         chunk_length=args.chunk_length, max_steps=args.max_steps, frames=args.frames,
-        expert_options=dict(args.expert_option) or None,
+        expert_options=dict(args.expert_option) or None, instructions=instructions,
+        start_states=args.start_states,
     )
     return _run_generation(config, args, "generate")
 

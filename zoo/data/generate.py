@@ -7,6 +7,7 @@ the manifest, so a rerun of a killed command skips them and redoes the rest.
 
 from __future__ import annotations
 
+import json
 import shutil
 from collections.abc import Callable
 from dataclasses import asdict
@@ -62,7 +63,7 @@ def generate(
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    stored = asdict(config)
+    stored = json.loads(json.dumps(asdict(config)))  # as the manifest holds it (lists, not tuples)
     manifest = load_manifest(out)
     if manifest is None:
         manifest = new_manifest(stored)

@@ -15,6 +15,7 @@ from zoo.data.manifest import MANIFEST, load_manifest
 from zoo.data.shards import FRAMES, RENDER, RESIDUAL
 from zoo.envs.constants import ACHIEVEMENT_NAMES
 from zoo.envs.schema import FRAME_SHAPE
+from zoo.experts.scripted.schedule import OUTCOMES, add_tallies
 from zoo.files import sha256_file
 
 RAW_FRAME_BYTES = int(FRAME_SHAPE[0] * FRAME_SHAPE[1] * FRAME_SHAPE[2])
@@ -68,6 +69,7 @@ def dataset_info(root: str | Path, skip_corrupt: bool = False) -> dict:
     unlocks = {k: sum(e["achievement_unlocks"][k] for e in shards) for k in ACHIEVEMENT_NAMES}
     shard_bytes = sum(e["bytes"] for e in shards)
     frame_bytes = sum(_frame_bytes(root / e["file"]) for e in check.good)
+    tallies = [e["instructions"] for e in shards if "instructions" in e]
     return {
         "root": str(root),
         "ok": not check.bad or skip_corrupt,
@@ -88,7 +90,20 @@ def dataset_info(root: str | Path, skip_corrupt: bool = False) -> dict:
         "noop_ratio_after": noop["kept_noop_steps"] / max(noop["kept_steps"], 1),
         "noop_min_run": manifest["config"].get("min_noop_run"),
         "achievement_unlock_rates": {k: v / max(episodes, 1) for k, v in unlocks.items()},
+        "instructions": add_tallies(tallies) if tallies else None,
     }
+
+
+def _instruction_lines(tally: dict[str, dict], timeout: int) -> list[str]:
+    """Per caption of a scheduled dataset: how its instructions ended."""
+    outcomes = " / ".join(OUTCOMES)
+    lines = [f"instructions (timeout {timeout} actions): {outcomes}, mean actions to complete"]
+    for caption, row in tally.items():
+        given = sum(row[outcome] for outcome in OUTCOMES)
+        shares = " ".join(f"{row[outcome] / max(given, 1):6.1%}" for outcome in OUTCOMES)
+        mean = f"{row['completed_actions'] / row['completed']:6.1f}" if row["completed"] else "     -"
+        lines.append(f"  {caption:22s} {shares}  {mean}  ({given} given)")
+    return lines
 
 
 def format_info(info: dict) -> str:
@@ -111,6 +126,8 @@ def format_info(info: dict) -> str:
             f"{dagger['learner_sha256'][:12]}..., temperature {dagger['learner_temperature']}), "
             f"expert acts with beta {dagger['beta']} per {dagger['mix']}"
         )
+    if info["instructions"]:
+        lines += _instruction_lines(info["instructions"], cfg["instructions"]["timeout"])
     lines.append("achievement unlock rates:")
     rates = info["achievement_unlock_rates"]
     lines += [f"  {name:20s} {rate:6.1%}" for name, rate in rates.items()]

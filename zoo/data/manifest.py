@@ -22,6 +22,9 @@ VERSIONED_PACKAGES = ("crafter-zoo", "crafter", "craftax", "jax", "numpy", "zsta
 FLAT_DAGGER_KEYS = ("learner", "learner_sha256", "learner_temperature", "beta", "mix", "round")
 """The DAgger settings that manifests written before ``GenerationConfig.dagger`` held flat in
 ``config``, beside ``source`` ("dagger" or None)."""
+ADDED_CONFIG_KEYS = ("instructions", "start_states")
+"""``config`` fields newer than some manifests, read as None (their default) where one lacks
+them, so an old folder's config reads as this zoo writes it."""
 
 
 class DatasetMismatchError(RuntimeError):
@@ -69,6 +72,8 @@ def load_manifest(root: str | Path) -> dict | None:
         )
     if "config" in manifest:
         manifest["config"] = nest_dagger(manifest["config"])
+        for key in ADDED_CONFIG_KEYS:
+            manifest["config"].setdefault(key, None)
     return manifest
 
 

@@ -25,6 +25,11 @@ from zoo.data.storage import join, tar_samples
 from zoo.envs.schema import validate_state
 
 STEP_ARRAYS = {"actions": np.int64, "rewards": np.float32, "noop": np.bool_, "noop_run": np.int32}
+OPTIONAL_STEP_ARRAYS = {"instruction": np.int16}
+"""Step arrays only some shards hold, read as ``NO_INSTRUCTION`` where a shard has none, so
+every chunk has them: ``instruction``, the caption id the expert was commanded (``zoo data
+generate --instructions``)."""
+NO_INSTRUCTION = -1
 META_FIELDS = ("episode", "seed", "offset", "length", "episode_length", "last", "env", "expert")
 RENDERED_META_FIELDS = ("renderer", "frames_crc32")
 
@@ -72,7 +77,9 @@ def decode_sample(sample: dict) -> dict:
         n = int(meta["length"])
         steps = decode_arrays(sample[STEPS], "steps")
         state = decode_arrays(sample[STATE], "state")
-        for name, dtype in STEP_ARRAYS.items():
+        for name, dtype in OPTIONAL_STEP_ARRAYS.items():
+            steps.setdefault(name, np.full(n, NO_INSTRUCTION, dtype))
+        for name, dtype in {**STEP_ARRAYS, **OPTIONAL_STEP_ARRAYS}.items():
             if name not in steps:
                 raise ValueError(f"steps lacks {name!r}")
             if steps[name].shape != (n,) or steps[name].dtype != dtype:
@@ -90,7 +97,8 @@ def decode_sample(sample: dict) -> dict:
             frames = decode_frames(sample[FRAMES], n)
     except ValueError as err:
         raise ValueError(f"{where}: {err}") from err
-    return {**{k: steps[k] for k in STEP_ARRAYS}, "frames": frames, "state": state, "meta": meta}
+    arrays = {k: steps[k] for k in (*STEP_ARRAYS, *OPTIONAL_STEP_ARRAYS)}
+    return {**arrays, "frames": frames, "state": state, "meta": meta}
 
 
 def _check_order(chunk: dict, expected: dict | None, url: str) -> dict | None:
@@ -155,7 +163,8 @@ def iter_chunks(
 
 def join_chunks(chunks: list[dict]) -> dict:
     """Concatenate consecutive chunks of one episode; meta describes the whole episode."""
-    out = {k: np.concatenate([c[k] for c in chunks]) for k in (*STEP_ARRAYS, "frames")}
+    keys = (*STEP_ARRAYS, *OPTIONAL_STEP_ARRAYS, "frames")
+    out = {k: np.concatenate([c[k] for c in chunks]) for k in keys}
     out["state"] = {k: np.concatenate([c["state"][k] for c in chunks]) for k in chunks[0]["state"]}
     out["meta"] = {**chunks[0]["meta"], "length": len(out["actions"]), "last": True}
     return out
@@ -176,6 +185,6 @@ def iter_episodes(
 
 
 __all__ = [
-    "CorruptShardError", "ReadStats", "decode_sample", "filter_noops", "iter_chunks",
-    "iter_episodes", "join_chunks", "list_shards",
+    "NO_INSTRUCTION", "OPTIONAL_STEP_ARRAYS", "CorruptShardError", "ReadStats", "decode_sample",
+    "filter_noops", "iter_chunks", "iter_episodes", "join_chunks", "list_shards",
 ]

@@ -24,6 +24,13 @@ from zoo.data.shards import SHARD_PATTERN, ChunkEncoder, EpisodeRecorder, assemb
 from zoo.envs.base import Step, episode_seed
 from zoo.envs.constants import ACHIEVEMENT_NAMES
 from zoo.envs.schema import index_state
+from zoo.envs.tasks.starts import START_STATES, TaskStartEnv
+from zoo.experts.scripted.schedule import (
+    InstructionSchedule,
+    InstructionScheduler,
+    add_tallies,
+    tally_outcomes,
+)
 
 ProgressFn = Callable[[int, int], None]  # (episodes finished, frames recorded) since last call
 AgentBuilder = Callable[["GenerationConfig", int], object]
@@ -87,6 +94,11 @@ class GenerationConfig:
             ``{"plants_first": True}``); None: its defaults (and older manifests compare equal).
         dagger: DAgger rollouts, the expert labelling a learner's play; None: the expert plays.
             A dict (as read back from a manifest) becomes ``DaggerSettings``.
+        instructions: the schedule of captions the scripted expert is told one after another
+            (``zoo.experts.scripted.schedule``), each step recording the one it pursued; None:
+            normal play. A dict (as read back from a manifest) becomes ``InstructionSchedule``.
+        start_states: None (or "default"): the game's own start; "tasks": each episode starts
+            with one of the task suites' starting inventories (``zoo.envs.tasks.starts``).
     """
 
     expert: str
@@ -103,6 +115,8 @@ class GenerationConfig:
     frames: str | None = None
     expert_options: dict | None = field(default=None, hash=False)  # a dict: keep hash() working
     dagger: DaggerSettings | None = None
+    instructions: InstructionSchedule | None = None
+    start_states: str | None = None
 
     def __post_init__(self) -> None:
         if self.expert_options == {}:
@@ -122,6 +136,20 @@ class GenerationConfig:
             )
         if isinstance(self.dagger, dict):
             object.__setattr__(self, "dagger", DaggerSettings(**self.dagger))
+        if isinstance(self.instructions, dict):
+            object.__setattr__(self, "instructions", InstructionSchedule(**self.instructions))
+        if self.instructions is not None and (self.expert != "scripted" or self.dagger is not None):
+            raise ValueError(
+                "an instruction schedule is followed by the scripted expert playing alone "
+                f"(expert='scripted', no dagger), got expert={self.expert!r}"
+                + (" with dagger settings" if self.dagger is not None else "")
+            )
+        if self.start_states == "default":
+            object.__setattr__(self, "start_states", None)  # one spelling of the game's start
+        if self.start_states not in (None, *START_STATES):
+            raise ValueError(
+                f"start_states must be one of {START_STATES}, got {self.start_states!r}"
+            )
 
     @property
     def num_shards(self) -> int:
@@ -154,6 +182,11 @@ class ShardGenerator:
         # rendered frames of a state-only expert are drawn once, by the re-render that codes them
         pixels = config.frames != "rendered" or getattr(self.agent, "needs_pixels", True)
         self.env = make_env(config.env, self.num_envs, pixels=pixels, max_steps=config.max_steps)
+        if config.start_states == "tasks":
+            self.env = TaskStartEnv(self.env)
+        self.scheduler = None  # tells the expert the schedule's instructions
+        if config.instructions is not None:
+            self.scheduler = InstructionScheduler(config.instructions, self.agent)
         self.versions = package_versions()
         self.renderer = renderer_version() if config.frames == "rendered" else None
 
@@ -185,7 +218,7 @@ class ShardGenerator:
                 seeds[slot] = episode_seed(cfg.seed, episode)
                 recorders[slot] = EpisodeRecorder(
                     episode, int(seeds[slot]), workdir, cfg.chunk_length, meta, encoder, cfg.codec,
-                    rendered=self.renderer is not None,
+                    rendered=self.renderer is not None, instructed=self.scheduler is not None,
                 )
                 agreed[slot] = drove[slot] = 0
                 return True
@@ -194,11 +227,16 @@ class ShardGenerator:
                 start(slot)
             step = self.env.reset(seeds)
             self.agent.reset(seeds)
+            if self.scheduler is not None:
+                self.scheduler.reset(seeds)
             self._observe(step, recorders, np.ones(self.num_envs, bool))
             frames = 0
             while any(rec is not None for rec in recorders):
                 actions = np.asarray(self.agent.act(step))
+                commanded = self._commanded()
                 after = self.env.step(actions)
+                if self.scheduler is not None:
+                    self.scheduler.update(step.state, after.state)
                 labels, noop = self._labels(actions, step, after)
                 if cfg.dagger is not None:
                     agreed += self.agent.learner_actions == labels
@@ -208,11 +246,12 @@ class ShardGenerator:
                 for slot, rec in enumerate(recorders):
                     if rec is None:
                         continue
-                    rec.act(int(labels[slot]), float(after.reward[slot]), bool(noop[slot]))
+                    rec.act(int(labels[slot]), float(after.reward[slot]), bool(noop[slot]),
+                            int(commanded[slot]))
                     rec.observe(_frame(after, slot), index_state(after.state, slot), rngs[slot])
                     frames += 1
                     if after.done[slot]:
-                        summaries[rec.episode] = self._summary(rec)
+                        summaries[rec.episode] = self._summary(rec, slot)
                         if cfg.dagger is not None:
                             summaries[rec.episode]["dagger"] = (int(agreed[slot]), int(drove[slot]))
                         if progress:
@@ -223,6 +262,8 @@ class ShardGenerator:
                 if restart.any():
                     fresh = self.env.reset(seeds, mask=restart)
                     self.agent.reset(seeds, mask=restart)
+                    if self.scheduler is not None:
+                        self.scheduler.reset(seeds, restart)
                     done = after.done & ~restart
                     step = Step(fresh.frames, fresh.state, after.reward, done, fresh.raw)
                     self._observe(step, recorders, restart)
@@ -252,6 +293,12 @@ class ShardGenerator:
         labels = self.agent.labels
         return labels, noop & (labels == actions)
 
+    def _commanded(self) -> np.ndarray:
+        """The caption id each env's next action pursues (-1 everywhere without a schedule)."""
+        if self.scheduler is None:
+            return np.full(self.num_envs, -1, np.int16)
+        return self.scheduler.ids
+
     def _state_rngs(self, step: Step) -> np.ndarray | list[None]:
         """Per env, Craftax's ``state_rng`` (rendered frames need it), else None. Read now:
         the env's next call donates the buffers of ``step.raw``."""
@@ -267,9 +314,10 @@ class ShardGenerator:
                     _frame(step, slot), index_state(step.state, slot), rngs[slot]
                 )
 
-    def _summary(self, rec: EpisodeRecorder) -> dict:
+    def _summary(self, rec: EpisodeRecorder, slot: int) -> dict:
         """Finish the episode and keep what the manifest reports about it."""
-        written = rec.finish()
+        segments = None if self.scheduler is None else self.scheduler.finish(slot)
+        written = rec.finish(None if segments is None else {"instructions": segments})
         noop = np.asarray(rec.noop, bool)
         actions = np.asarray(rec.actions)
         counts = noop_counts(
@@ -280,6 +328,7 @@ class ShardGenerator:
             "written": written,
             "achievements": rec.final_state["achievements"].astype(bool),
             "return": float(np.sum(rec.rewards)),
+            "instructions": segments,
         }
 
     def _entry(self, index: int, path: Path, sha: str, episodes: list[dict]) -> dict:
@@ -292,6 +341,9 @@ class ShardGenerator:
         extra = {}
         if self.renderer is not None:
             extra["renderer"] = self.renderer
+        if cfg.instructions is not None:
+            tallies = [tally_outcomes(e["instructions"], cfg.instructions) for e in episodes]
+            extra["instructions"] = add_tallies(tallies)
         if cfg.dagger is not None:
             steps = sum(e["length"] for e in episodes)
             extra["dagger"] = {

@@ -103,6 +103,8 @@ class EpisodeRecorder:
             order (it overlaps with env stepping).
         rendered: keep each step's Craftax ``state_rng`` and store frames as residuals against
             re-renders from the state (``meta`` should name the renderer version).
+        instructed: store each step's commanded instruction (``act``'s ``instruction``) as the
+            steps array ``instruction``; other recorders write the format as before.
     """
 
     def __init__(
@@ -115,6 +117,7 @@ class EpisodeRecorder:
         encoder: Executor,
         codec: FrameCodec,
         rendered: bool = False,
+        instructed: bool = False,
     ) -> None:
         self.episode, self.seed, self.meta = episode, seed, meta
         self.chunk_length, self.encoder, self.codec = chunk_length, encoder, codec
@@ -132,6 +135,7 @@ class EpisodeRecorder:
         self.actions: list[int] = []
         self.rewards: list[float] = []
         self.noop: list[bool] = []
+        self.instructions: list[int] | None = [] if instructed else None
         self.sleeping: list[bool] = []  # per observation, for the manifest's filtered noop ratio
         self.final_state: State | None = None
 
@@ -158,11 +162,14 @@ class EpisodeRecorder:
         if self._fill == self.chunk_length:
             self._flush()
 
-    def act(self, action: int, reward: float, noop: bool) -> None:
-        """Record the action taken at the latest observation, its reward and noop flag."""
+    def act(self, action: int, reward: float, noop: bool, instruction: int = -1) -> None:
+        """Record the action taken at the latest observation, its reward and noop flag (and on
+        an instructed recorder the caption id it was commanded, -1 for none)."""
         self.actions.append(action)
         self.rewards.append(reward)
         self.noop.append(noop)
+        if self.instructions is not None:
+            self.instructions.append(instruction)
 
     def _flush(self) -> None:
         n = self._fill
@@ -173,9 +180,11 @@ class EpisodeRecorder:
         self._chunks.append(job)
         self._fill = 0
 
-    def finish(self) -> Future:
+    def finish(self, episode_meta: dict | None = None) -> Future:
         """Close the episode after its final observation. The fragment is written on the
-        encoder (after the episode's chunks), so play goes on meanwhile; wait on the result."""
+        encoder (after the episode's chunks), so play goes on meanwhile; wait on the result.
+        ``episode_meta`` (what is known of the episode only at its end) goes into the meta of
+        each of its chunks."""
         if self._fill:
             self._flush()
         self.act(-1, 0.0, False)
@@ -185,9 +194,11 @@ class EpisodeRecorder:
             "noop": np.asarray(self.noop, bool),
         }
         steps["noop_run"] = noop_runs(steps["noop"])
-        return self.encoder.submit(self._write_fragment, steps)
+        if self.instructions is not None:
+            steps["instruction"] = np.asarray(self.instructions, np.int16)
+        return self.encoder.submit(self._write_fragment, steps, episode_meta or {})
 
-    def _write_fragment(self, steps: dict[str, np.ndarray]) -> None:
+    def _write_fragment(self, steps: dict[str, np.ndarray], episode_meta: dict) -> None:
         length = len(steps["actions"])
         spans = [future.result() for future in self._chunks]  # done: same single thread
         with open(self.spool, "rb") as spool, open(self.fragment, "wb") as out:
@@ -197,7 +208,7 @@ class EpisodeRecorder:
                 spool.seek(offset)
                 key = sample_key(self.episode, start)
                 meta = {
-                    **self.meta, **extra,
+                    **self.meta, **extra, **episode_meta,
                     "episode": self.episode, "seed": self.seed, "offset": start,
                     "length": stop - start, "episode_length": length, "last": stop == length,
                 }

@@ -4,8 +4,10 @@ A pipeline stage over shard sources (``zoo.data.sequences.ShardSources``): for e
 shard it loads the matching ``zoo goals embed`` shard (same index, same episodes), relabels each
 episode once at its first chunk (``zoo.goals.relabel``) and attaches to every chunk, per step,
 ``goal`` (float16 (n, D), zeros on unconditional pieces), ``goal_mask`` (bool (n,)) and
-``goal_step`` (int64 (n,), the episode step whose clip is the goal). Attached before the noop
-filter, so the filter drops a step's goal with the step.
+``goal_step`` (int64 (n,), the episode step whose clip is the goal; -1 where the goal is a
+caption's embedding). Attached before the noop filter, so the filter drops a step's goal with
+the step. On goal-directed CrafterPlay the goals can also be the commanded instructions
+(``zoo.goals.sources``; an episode's instruction segments are in its chunks' meta).
 
 The relabelling stream of an episode is ``episode_rng(seed, epoch, episode)``: new goals every
 training epoch, the same in whatever worker reads the episode; ``start_epoch`` is called by
@@ -19,22 +21,36 @@ from pathlib import Path
 
 import numpy as np
 
+from zoo.data.sequences import read_shards
 from zoo.goals.embed import load_embedding_manifest, read_embedding_shard
 from zoo.goals.relabel import RelabelParams, drop_sequence_goals, episode_rng, relabel_episode
-from zoo.data.sequences import read_shards
+from zoo.goals.sources import GoalSourceParams, command_rng, episode_goals
 
 GOAL_KEYS = ("goal", "goal_mask", "goal_step")
 
 
 class GoalAttacher:
-    """Reads shards and attaches relabelled goals to their chunks (see the module docstring)."""
+    """Reads shards and attaches relabelled goals to their chunks (see the module docstring).
 
-    def __init__(self, embeddings: str | Path, params: RelabelParams, skip_corrupt: bool) -> None:
+    ``sources`` says where goals come from (None: hindsight); commanded caption goals need
+    ``prototypes``, the caption embeddings of ``zoo.goals.sources.caption_goals``.
+    """
+
+    def __init__(
+        self,
+        embeddings: str | Path,
+        params: RelabelParams,
+        skip_corrupt: bool,
+        sources: GoalSourceParams | None = None,
+        prototypes: dict[int, np.ndarray] | None = None,
+    ) -> None:
         manifest = load_embedding_manifest(embeddings)
         self.root = Path(embeddings)
         self.files = {int(entry["index"]): entry["file"] for entry in manifest["shards"]}
         self.embed_dim = int(manifest["embed_dim"])
         self.params = params
+        self.sources = sources or GoalSourceParams()
+        self.prototypes = prototypes or {}
         self.skip_corrupt = skip_corrupt
         self.seed = 0
         self.epoch = 0
@@ -80,9 +96,10 @@ class GoalAttacher:
         labels = relabel_episode(
             record["caption"], self.params, episode_rng(self.seed, self.epoch, episode)
         )
-        goal = record["goal"][labels.goal_step]
-        goal[~labels.conditioned] = 0
-        return {"goal": goal, "goal_mask": labels.conditioned, "goal_step": labels.goal_step}
+        return episode_goals(
+            record["goal"], labels, meta.get("instructions"), self.sources, self.prototypes,
+            command_rng(self.seed, self.epoch, episode),
+        )
 
 
 class SequenceGoalDrop:

@@ -1,0 +1,104 @@
+"""Goal sources for C-Steve-1: hindsight, the commanded instructions (caption or completing
+clip), and their mix, on synthetic episodes where every answer is known."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from zoo.goals.relabel import Relabelling
+from zoo.goals.sources import CAPTION_GOAL_STEP, GoalSourceParams, episode_goals
+
+D = 4
+SEGMENT = 3
+
+
+def _episode(segments: int, seed: int = 0):
+    """Goal rows, hindsight labels (each step its own goal) and segments of SEGMENT actions,
+    captions 0..4 in turn, completed and timed out in turn, the last one ended."""
+    rng = np.random.default_rng(seed)
+    length = segments * SEGMENT + 1
+    goals = rng.normal(size=(length, D)).astype(np.float16)
+    labels = Relabelling(np.arange(length), np.ones(length, bool), np.zeros(length, bool))
+    outcomes = ["completed", "timed_out"]
+    parts = [
+        [k * SEGMENT, (k + 1) * SEGMENT, k % 5, outcomes[k % 2]] for k in range(segments)
+    ]
+    parts[-1][3] = "ended"
+    return goals, labels, parts
+
+
+PROTOTYPES = {c: np.full(D, c + 1, np.float16) for c in range(4)}  # caption 4 never fired
+
+
+def _goals(source: str, goal: str = "caption", weight: float = 0.5, segments: int = 20,
+           conditioned: np.ndarray | None = None) -> tuple[dict, np.ndarray, list]:
+    goals, labels, parts = _episode(segments)
+    if conditioned is not None:
+        labels.conditioned = conditioned
+    params = GoalSourceParams(source, weight, goal)
+    out = episode_goals(goals, labels, parts, params, PROTOTYPES, np.random.default_rng(1))
+    return out, goals, parts
+
+
+def test_hindsight_ignores_the_instructions() -> None:
+    out, goals, _ = _goals("hindsight")
+    np.testing.assert_array_equal(out["goal"], goals)
+    np.testing.assert_array_equal(out["goal_step"], np.arange(len(goals)))
+
+
+def test_commanded_captions_give_each_step_its_captions_embedding() -> None:
+    out, goals, parts = _goals("commanded")
+    for start, stop, caption, _ in parts:
+        if caption in PROTOTYPES:
+            assert (out["goal"][start:stop] == PROTOTYPES[caption]).all()
+            assert (out["goal_step"][start:stop] == CAPTION_GOAL_STEP).all()
+        else:  # a caption without embedding keeps hindsight goals
+            np.testing.assert_array_equal(out["goal"][start:stop], goals[start:stop])
+    np.testing.assert_array_equal(out["goal"][-1], goals[-1])  # the final observation
+
+
+def test_commanded_completions_give_the_completing_clip_or_hindsight() -> None:
+    out, goals, parts = _goals("commanded", "completion")
+    for start, stop, _, outcome in parts:
+        if outcome == "completed":
+            assert (out["goal_step"][start:stop] == stop - 1).all()
+            assert (out["goal"][start:stop] == goals[stop - 1]).all()
+        else:
+            np.testing.assert_array_equal(out["goal_step"][start:stop], np.arange(start, stop))
+
+
+@pytest.mark.parametrize("weight", [0.2, 0.7])
+def test_mix_gives_commanded_goals_to_its_share_of_segments(weight: float) -> None:
+    segments = 3000
+    out, goals, parts = _goals("mix", weight=weight, segments=segments)
+    commanded = (out["goal_step"] == CAPTION_GOAL_STEP)[[s[0] for s in parts]]
+    with_embedding = np.array([s[2] in PROTOTYPES for s in parts])
+    share = commanded[with_embedding].mean()
+    assert abs(share - weight) < 0.04  # ~5 standard deviations at 2,400 segments
+    kept = out["goal_step"] != CAPTION_GOAL_STEP  # the others keep their hindsight goals
+    np.testing.assert_array_equal(out["goal"][kept], goals[kept])
+
+
+def test_unconditional_steps_stay_unconditional_whatever_the_source() -> None:
+    conditioned = np.arange(20 * SEGMENT + 1) % 4 != 0
+    out, _, _ = _goals("commanded", conditioned=conditioned)
+    assert (out["goal"][~conditioned] == 0).all() and (out["goal"][conditioned] != 0).any()
+    np.testing.assert_array_equal(out["goal_mask"], conditioned)
+
+
+def test_episodes_without_instructions_keep_hindsight_goals() -> None:
+    goals, labels, _ = _episode(5)
+    params = GoalSourceParams("commanded")
+    out = episode_goals(goals, labels, None, params, PROTOTYPES, np.random.default_rng(0))
+    np.testing.assert_array_equal(out["goal"], goals)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"source": "oracle"}, "goal_source='oracle'"),
+    ({"commanded_goal": "text"}, "commanded_goal='text'"),
+    ({"source": "mix", "commanded_weight": 1.5}, "must lie in"),
+])
+def test_bad_goal_sources_are_refused(kwargs, message) -> None:
+    with pytest.raises(ValueError, match=message):
+        GoalSourceParams(**kwargs)
