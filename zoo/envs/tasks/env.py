@@ -38,7 +38,7 @@ class TaskEnv:
 
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> Step:
         mask = np.ones(self.num_envs, bool) if mask is None else np.asarray(mask, bool)
-        step = _writable(self.env.reset(seeds, mask))
+        step = writable_step(self.env.reset(seeds, mask))
         if self._last is None:  # the env may hold other edits: export what its games hold
             self._editor.edit(step, ~mask, inventory=False)
         else:  # rows not reset keep what this wrapper last showed
@@ -53,7 +53,7 @@ class TaskEnv:
         return step
 
     def step(self, actions: np.ndarray) -> Step:
-        step = _writable(self.env.step(actions))
+        step = writable_step(self.env.step(actions))
         if self.task.peaceful:
             self._editor.edit(step, np.ones(self.num_envs, bool), inventory=False)
         self.completed = self.progress.update(step.state)
@@ -63,7 +63,7 @@ class TaskEnv:
         return step
 
 
-def _writable(step: Step) -> Step:
+def writable_step(step: Step) -> Step:
     """Own copies of the arrays (Craftax hands back read-only views of device buffers)."""
     step.state = {k: np.array(v) for k, v in step.state.items()}
     step.frames = None if step.frames is None else np.array(step.frames)

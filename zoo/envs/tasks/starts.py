@@ -14,7 +14,7 @@ import numpy as np
 
 from zoo.envs.base import GameEnv, Step
 from zoo.envs.tasks.editors import make_editor
-from zoo.envs.tasks.env import _writable
+from zoo.envs.tasks.env import writable_step
 from zoo.envs.tasks.specs import TASKS, TaskSpec
 
 START_STATES = ("default", "tasks")
@@ -53,7 +53,7 @@ class TaskStartEnv:
 
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> Step:
         mask = np.ones(self.num_envs, bool) if mask is None else np.asarray(mask, bool)
-        step = _writable(self.env.reset(seeds, mask))
+        step = writable_step(self.env.reset(seeds, mask))
         chosen = np.array([start_index(s, len(self.starts)) for s in np.asarray(seeds)])
         for k, editor in enumerate(self._editors):
             if editor is not None and (mask & (chosen == k)).any():
