@@ -14,6 +14,7 @@ from zoo.agents import AGENT_NAMES, checkpoint_kind, load_checkpoint_agent, make
 from zoo.argtypes import existing_dir, non_negative_int, out_dir, positive_int
 from zoo.envs import ENV_NAMES
 from zoo.envs.tasks import SINGLE_STEP_TASKS, TASKS
+from zoo.eval.play import inference_meta
 from zoo.eval.steve_tables import STEVE_ROWS, TABLE_ROWS
 
 DESCRIPTION = """\
@@ -34,7 +35,8 @@ reports under one OUT and a summary; see `zoo eval task-table --help`.
 """
 USAGE = """\
 %(prog)s --env {craftax,crafter} (--agent NAME | --checkpoint PATH) [options]
-       %(prog)s {task-table,cfg-sweep,goal-check} ... (C-Steve-1's results protocol)"""
+       %(prog)s {task-table,cfg-sweep,goal-check} ... (C-Steve-1's results protocol)
+       %(prog)s instructions ... (the instruction matrix of any instructable agent)"""
 PROTOCOLS = {  # subcommand -> (its summary's mode name, one-line help)
     "task-table": ("table", (
         "single-step tasks: random, C-VPT, C-Steve-1 with its instruction and with another task's"
@@ -81,9 +83,9 @@ def register(subparsers) -> None:
         help="episode step limit (default 10000; with --task the task's: 500 single-step, 1000 T1-T4)",
     )
     p.add_argument(
-        "--temperature", type=float, default=1.0,
-        help="C-VPT, C-Steve-1, zoo rl agents: sample from softmax(logits / T) (default 1); 0 "
-        "plays the most likely action",
+        "--temperature", type=float,
+        help="C-VPT, C-Steve-1, zoo rl agents: sample from softmax(logits / T) (default 1, or "
+        "the temperature a C-Steve-1 export records); 0 plays the most likely action",
     )
     p.add_argument(
         "--cclip", type=Path, metavar="CKPT",
@@ -94,8 +96,9 @@ def register(subparsers) -> None:
         help="C-Steve-1: the CVAE prior checkpoint (text embedding -> goal)",
     )
     p.add_argument(
-        "--cfg-scale", type=float, default=1.5,
-        help="C-Steve-1: classifier-free guidance scale (paper 1.5; 0: conditional only)",
+        "--cfg-scale", type=float,
+        help="C-Steve-1: classifier-free guidance scale (default: the scale its export "
+        "records, else the paper's 1.5; 0: conditional only)",
     )
     p.add_argument("--no-gif", action="store_true", help="skip episode.gif")
     p.add_argument("--overwrite", action="store_true", help="replace a report already in --out")
@@ -122,6 +125,7 @@ def register(subparsers) -> None:
         sub.add_argument("--out", type=out_dir, required=True, help="folder of all reports")
         sub.set_defaults(handler=run_protocol)
         ADD_PROTOCOL_ARGS[name](sub)
+    _register_instruction_matrix(protocols)
 
 
 def _protocol_description(mode: str, line: str) -> str:
@@ -147,6 +151,11 @@ def _add_play_args(p: argparse.ArgumentParser, steve_required: bool) -> None:
     p.add_argument("--csteve1", type=Path, required=steve_required, metavar="CKPT",
                    help="C-Steve-1 checkpoint or export")
     _add_goal_models(p, steve_required)
+    _add_episode_args(p)
+
+
+def _add_episode_args(p: argparse.ArgumentParser) -> None:
+    """The games and the episodes every row or cell plays."""
     p.add_argument("--env", nargs="+", choices=ENV_NAMES, default=list(ENV_NAMES), metavar="GAME",
                    help=f"games: {', '.join(ENV_NAMES)} (default: both)")
     p.add_argument("--episodes", type=positive_int, default=100, help="per cell (default 100)")
@@ -154,8 +163,9 @@ def _add_play_args(p: argparse.ArgumentParser, steve_required: bool) -> None:
                    help="episode j of every cell is seeded from (seed, j) (default 0)")
     p.add_argument("--num-envs", type=positive_int, default=20,
                    help="envs played at once (default 20)")
-    p.add_argument("--temperature", type=float, default=1.0,
-                   help="C-VPT and C-Steve-1 sample from softmax(logits / T) (default 1)")
+    p.add_argument("--temperature", type=float,
+                   help="C-VPT and C-Steve-1 sample from softmax(logits / T) (default 1, or the "
+                   "temperature a C-Steve-1 export records)")
 
 
 def _add_table_args(p: argparse.ArgumentParser) -> None:
@@ -167,8 +177,9 @@ def _add_table_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rows", nargs="+", choices=TABLE_ROWS, default=list(TABLE_ROWS),
                    metavar="ROW", help=f"table rows to run (default: all, {', '.join(TABLE_ROWS)}; "
                    "e.g. the baselines while C-Steve-1 trains)")
-    p.add_argument("--cfg-scale", type=float, default=1.5,
-                   help="C-Steve-1's classifier-free guidance scale (default 1.5)")
+    p.add_argument("--cfg-scale", type=float,
+                   help="C-Steve-1's classifier-free guidance scale (default: the scale its "
+                   "export records, else the paper's 1.5)")
 
 
 def _add_sweep_args(p: argparse.ArgumentParser) -> None:
@@ -214,7 +225,7 @@ def _build_agent(args: argparse.Namespace, num_envs: int):
             "prior": None if args.prior is None else str(args.prior),
             "cfg_scale": args.cfg_scale,
         }
-        if name != "csteve1" and (args.cclip or args.prior or args.cfg_scale != 1.5):
+        if name != "csteve1" and (args.cclip or args.prior or args.cfg_scale is not None):
             raise UsageError("--cclip, --prior and --cfg-scale are for C-Steve-1 checkpoints only")
         if name == "csteve1" and args.task and not (args.cclip and args.prior):
             raise UsageError(
@@ -277,7 +288,7 @@ def run_eval(args: argparse.Namespace) -> int:
         "env": args.env,
         "agent": args.agent or getattr(agent, "name", "checkpoint"),
         "checkpoint": None if args.checkpoint is None else str(args.checkpoint),
-        "temperature": args.temperature,
+        **inference_meta(agent, args.temperature),
         "seed": args.seed,
         "num_envs": num_envs,
         "max_steps": args.max_steps,
@@ -307,6 +318,7 @@ def run_task_eval(args: argparse.Namespace, agent, num_envs: int, now: datetime)
 
     task = TASKS[args.task]
     instructable = hasattr(agent, "instruct")
+    played = inference_meta(agent, args.temperature)  # before chaining wraps the agent
     if (args.instruction is not None or args.chain) and not instructable:
         who = args.agent or args.checkpoint
         raise UsageError(f"agent {who} does not follow instructions (no instruct method)")
@@ -344,7 +356,7 @@ def run_task_eval(args: argparse.Namespace, agent, num_envs: int, now: datetime)
         "env": args.env,
         "agent": args.agent or getattr(agent, "name", "checkpoint"),
         "checkpoint": None if args.checkpoint is None else str(args.checkpoint),
-        "temperature": args.temperature,
+        **played,
         "seed": args.seed,
         "num_envs": num_envs,
         "max_steps": args.max_steps or task.max_steps,
@@ -399,3 +411,40 @@ def _check_protocol_args(args: argparse.Namespace) -> None:
         raise UsageError("the cvpt row needs --cvpt (the unconditioned baseline)")
     if set(STEVE_ROWS) & set(args.rows) and None in (args.csteve1, args.cclip, args.prior):
         raise UsageError("C-Steve-1 rows need --csteve1, --cclip and --prior")
+
+
+def _register_instruction_matrix(protocols) -> None:
+    """``zoo eval instructions``: for any instructable agent, named as ``zoo eval`` names it."""
+    from zoo.eval import instruction_matrix as matrix
+
+    p = protocols.add_parser("instructions", help=matrix.HELP, description=matrix.DESCRIPTION)
+    p.add_argument("--agent", choices=AGENT_NAMES, help="who plays (scripted: goal-directed)")
+    p.add_argument("--checkpoint", type=Path, help="a trained agent, e.g. a C-Steve-1 export")
+    _add_goal_models(p, required=False)
+    p.add_argument("--cfg-scale", type=float, help="C-Steve-1's guidance (default: its own)")
+    _add_episode_args(p)
+    p.add_argument("--max-steps", type=positive_int, default=200, help="L, per episode (200)")
+    p.add_argument("--instructions", nargs="+", help="some of the default instructions only")
+    p.add_argument("--out", type=out_dir, required=True, help="folder of the rows and report")
+    p.set_defaults(handler=run_instruction_matrix)
+
+
+def run_instruction_matrix(args: argparse.Namespace) -> int:
+    """``zoo eval instructions``: play or read every row, then write the report."""
+    from zoo.eval import instruction_matrix as matrix
+
+    num_envs = min(args.num_envs, args.episodes)
+    paths = [None if p is None else str(p) for p in (args.checkpoint, args.cclip, args.prior)]
+    setting = matrix.Setting(args.agent, *paths, args.cfg_scale, args.temperature, args.seed,
+                             args.episodes, args.max_steps)
+    try:
+        columns = matrix.pick_columns(args.instructions)
+        agent, setting = matrix.make_instructable(setting, num_envs, columns)
+        matrix.check_saved(args.out, args.env, columns, setting)
+    except ValueError as err:
+        print(f"zoo eval instructions: error: {err}", file=sys.stderr)
+        return 2
+    args.out.mkdir(parents=True, exist_ok=True)
+    report = matrix.run(agent, setting, args.env, columns, args.out, num_envs)
+    print(f"wrote {', '.join(str(args.out / name) for name in report['files'])}")
+    return 0
