@@ -416,14 +416,13 @@ def _check_protocol_args(args: argparse.Namespace) -> None:
 def _register_instruction_matrix(protocols) -> None:
     """``zoo eval instructions``: for any instructable agent, named as ``zoo eval`` names it."""
     from zoo.eval import instruction_matrix as matrix
-
     p = protocols.add_parser("instructions", help=matrix.HELP, description=matrix.DESCRIPTION)
     p.add_argument("--agent", choices=AGENT_NAMES, help="who plays (scripted: goal-directed)")
     p.add_argument("--checkpoint", type=Path, help="a trained agent, e.g. a C-Steve-1 export")
     _add_goal_models(p, required=False)
     p.add_argument("--cfg-scale", type=float, help="C-Steve-1's guidance (default: its own)")
     _add_episode_args(p)
-    p.add_argument("--max-steps", type=positive_int, default=200, help="L, per episode (200)")
+    p.add_argument("--max-steps", type=positive_int, default=200, help="L: steps per episode (200)")
     p.add_argument("--instructions", nargs="+", help="some of the default instructions only")
     p.add_argument("--out", type=out_dir, required=True, help="folder of the rows and report")
     p.set_defaults(handler=run_instruction_matrix)

@@ -289,7 +289,8 @@ def run(
 
 def format_markdown(report: dict) -> str:
     """Per game the matrix (k/N and the Wilson 95% interval in %; bold: the row's own
-    instruction, italic: the column's best other instruction) and its verdict line."""
+    instruction, italic: the column's best other instruction, if it gets any) and its verdict
+    line."""
     s = report["setting"]
     who = s["agent"] + (f" ({s['checkpoint']})" if s["checkpoint"] else "")
     guidance = "" if s["cfg_scale"] is None else f", guidance scale {s['cfg_scale']:g}"
@@ -298,12 +299,13 @@ def format_markdown(report: dict) -> str:
         (f"{s['episodes']} episodes per row, episode j seeded from ({s['seed']}, j) in every "
          "row; a cell counts the episodes where the column's achievement first happens within "
          f"{s['max_steps']} steps: k/N (Wilson 95%, %). Bold: the row's own instruction; italic: "
-         f"the column's best other instruction. Temperature {s['temperature']:g}{guidance}."),
+         "the column's best other instruction, if it gets any. Temperature "
+         f"{s['temperature']:g}{guidance}."),
     ]
     names = [c["achievement"] for c in report["columns"]]
     for game, g in report["games"].items():
         marks = {(c["instruction"], c["achievement"]): "**" for c in g["columns"]}
-        marks.update({(r, c["achievement"]): "_" for c in g["columns"] for r in c["best_other"]})
+        marks.update({(r, c["achievement"]): "_" for c in g["columns"] for r in _marked(c)})
         lines += ["", f"## {game}", "", "| instruction | " + " | ".join(names) + " |",
                   "|---|" + "---:|" * len(names)]
         for row, cells in g["counts"].items():
@@ -317,10 +319,16 @@ def format_markdown(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _marked(column: dict) -> list[str]:
+    """The best other instructions worth marking: none when the best gets nothing."""
+    return column["best_other"] if column["best_other_count"] else []
+
+
 def plot_matrix(report: dict, path: Path) -> Path:
     """A heat-map per game, side by side: share of episodes per cell, annotated k/N; the own
-    instruction's cells are outlined solid red, the best other instruction's dashed white. Drawn on an
-    Agg canvas (as ``zoo.eval.plots``), so the caller's matplotlib backend is left alone."""
+    instruction's cells are outlined solid red, the best other instruction's (if it gets any)
+    dashed white. Drawn on an Agg canvas (as ``zoo.eval.plots``), so the caller's matplotlib
+    backend is left alone."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.patches import Rectangle
@@ -339,7 +347,7 @@ def plot_matrix(report: dict, path: Path) -> Path:
                     fontsize=8, color="black" if value > 0.6 else "white")
         for j, column in enumerate(g["columns"]):
             for label, style, color, inset in [(column["instruction"], "-", "red", 0.04)] + [
-                    (r, "--", "white", 0.1) for r in column["best_other"]]:
+                    (r, "--", "white", 0.1) for r in _marked(column)]:
                 ax.add_patch(Rectangle(
                     (j - 0.5 + inset, rows.index(label) - 0.5 + inset), 1 - 2 * inset,
                     1 - 2 * inset, fill=False, edgecolor=color, linestyle=style, linewidth=2))
