@@ -13,8 +13,8 @@ case "$(uname -m)" in
   *) TORCH="torch==2.14.1 torchvision==0.29.1" ;;
 esac
 .venv/bin/python -m pip install -q --disable-pip-version-check $TORCH 2>&1 | grep -v "^WARNING: Location" || true
-.venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test]" 2>&1 | grep -v "^WARNING: Location" || true
-.venv/bin/python -c "import torch, torchvision, open_clip, lightning, jax, crafter, craftax, zoo" \
+.venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test,rl]" 2>&1 | grep -v "^WARNING: Location" || true
+.venv/bin/python -c "import torch, torchvision, open_clip, lightning, jax, crafter, craftax, gymnasium, stable_baselines3, zoo" \
   || { echo "setup.sh: the environment does not import; see the pip output above" >&2; exit 1; }
 # Craftax writes its texture cache on first use; two first-time jobs at once (a `zoo data
 # generate` beside a `zoo data dagger`) race on that file and one reads it half-written.

@@ -19,7 +19,7 @@ TOPS = ("zoo", "lit_models", "datamodules")
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("zoo.cli", "zoo.pipeline"),
     ("lit_models", "datamodules"),
-    ("zoo.eval", "zoo.rl"),
+    ("zoo.eval", "zoo.rl", "zoo.gym"),
     ("zoo.agents",),
     ("zoo.goals", "zoo.data", "zoo.captions"),
     ("zoo.weights", "zoo.models", "zoo.experts"),
