@@ -118,15 +118,15 @@ def prior_pairs(out: Path) -> Path:
     return pairs
 
 
-def checkpoint(out: Path, kind: str) -> Path:
-    """The run folder's one ``best-*.ckpt`` (the checkpoint validation chose), rebuilt as a
-    ``kind`` network without Lightning."""
+def checkpoint(out: Path, kind: str, pattern: str = "best-*.ckpt") -> Path:
+    """The run folder's one ``checkpoints/<pattern>`` (default: the checkpoint validation chose;
+    ``last.ckpt``: the newest weights), rebuilt as a ``kind`` network without Lightning."""
     from zoo.weights.export import load_model
 
     _folder(out)
-    found = sorted(out.glob("*/checkpoints/best-*.ckpt"))
+    found = sorted(out.glob(f"*/checkpoints/{pattern}"))
     if len(found) != 1:
-        raise Bad(f"{out}: expected one */checkpoints/best-*.ckpt, found {len(found)}")
+        raise Bad(f"{out}: expected one */checkpoints/{pattern}, found {len(found)}")
     try:
         load_model(found[0], kind)
     except Exception as err:  # noqa: BLE001 - torch.load raises many kinds on bad bytes
@@ -140,3 +140,12 @@ def report(out: Path, field: str) -> Path:
     if field not in _read_json(out / "report.json"):
         raise Bad(f"{out / 'report.json'} has no {field!r}")
     return out / "report.json"
+
+
+def scale(out: Path) -> Path:
+    """``zoo scale``'s ``scale.json`` parses and its ``scale.md`` is there."""
+    _folder(out)
+    _read_json(out / "scale.json")
+    if not (out / "scale.md").is_file():
+        raise Bad(f"{out / 'scale.md'} is missing")
+    return out / "scale.json"

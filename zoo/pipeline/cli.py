@@ -1,4 +1,4 @@
-"""``zoo pipeline --config configs/pipeline_quickstart.yaml --out DIR``."""
+"""``zoo pipeline --config configs/pipeline_quickstart.yaml --out DIR`` (or a DAgger config)."""
 
 from __future__ import annotations
 
@@ -22,27 +22,46 @@ runs again; the stages that read it run again when its new bytes differ.
 
 configs/pipeline_quickstart.yaml runs in minutes on a CPU; configs/pipeline_paper.yaml is the
 paper-scale recipe for GPUs. See docs/pipeline.md.
+
+A config with `kind: dagger` (configs/pipeline_dagger.yaml) runs DAgger rounds for C-VPT
+instead, from a C-VPT you trained first: per round, roll out the last round's weights with the
+scripted expert labelling every state (`zoo data dagger`), train from them on the expert data
+plus every round's labels (`zoo fit`), score the new weights (`zoo eval`); a retrained round
+reruns every round after it. See docs/dagger.md.
 """
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "pipeline",
-        help="the whole suite in one command: data, training, evaluation, one report",
+        help="the whole suite (or DAgger rounds) in one command: data, training, evaluation, "
+        "one report",
         description=DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--config", required=True, type=Path,
-                   help="pipeline YAML (configs/pipeline_quickstart.yaml, pipeline_paper.yaml)")
+                   help="pipeline YAML (configs/pipeline_quickstart.yaml, pipeline_paper.yaml, "
+                   "pipeline_dagger.yaml)")
     p.add_argument("--out", required=True, type=Path, help="folder of every output and the report")
+    p.add_argument("--dry-run", action="store_true",
+                   help="a suite config at its model sizes and sequence shapes on a few episodes "
+                   "on the CPU, each fit 2 steps, then `zoo scale` (pipeline_paper.yaml: 21 min on "
+                   "2 busy cores); docs/pipeline.md lists what it changes")
     p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from zoo.pipeline.config import load_pipeline_config
+    from zoo.pipeline.config import PipelineConfig, load_pipeline_config
 
     try:
-        config = load_pipeline_config(args.config)
+        config = paper = load_pipeline_config(args.config)
+        if args.dry_run:
+            if not isinstance(config, PipelineConfig):
+                raise ValueError(f"{args.config}: --dry-run takes a suite config, not "
+                                 "`kind: dagger`")
+            from zoo.pipeline.dry_run import dry_config
+
+            config = dry_config(config, args.out)
     except (ValueError, FileNotFoundError) as err:
         print(f"zoo pipeline: {err}", file=sys.stderr)
         return 2
@@ -52,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     from zoo.pipeline.report import write_reports
     from zoo.pipeline.runner import run_pipeline
 
-    doc = run_pipeline(config, args.config, args.out)
+    doc = run_pipeline(config, args.config, args.out, paper if args.dry_run else None)
     md, page = write_reports(args.out, doc)
     for record in doc["stages"]:
         seconds = record.get("seconds")

@@ -4,6 +4,8 @@ Every number is read back from what the stages wrote (manifests, checkpoints, re
 files), never from the pipeline's memory, so a report rebuilt after a resumed run shows what
 is on disk. The tables are built once and rendered twice; the HTML embeds the achievement plots
 and episode GIFs as base64 ``<img>`` so the one file can be mailed or attached to an issue.
+Tables are found by stage name, so one report serves both plans: the suite's and DAgger's
+(``dagger-rN`` rollouts, ``fit-rN`` weights, ``eval-rN-GAME`` scores: one row per round).
 """
 
 from __future__ import annotations
@@ -11,10 +13,15 @@ from __future__ import annotations
 import base64
 import html
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from zoo.data.manifest import nest_dagger
+from zoo.envs import ENV_NAMES
+
 AGENT_TITLES = {"scripted": "scripted expert", "cvpt": "C-VPT"}
+ROUND_TITLE = "C-VPT, DAgger round {}"
 Figure = tuple[str, Path]  # (caption, image file)
 
 
@@ -32,7 +39,9 @@ def write_reports(out: Path, doc: dict) -> tuple[Path, Path]:
                           _retrieval(records), _task(records)) if t.rows]
     figures = _figures(records)
     state = "all stages finished" if doc["ok"] else "INCOMPLETE"
-    summary = (f"config `{doc['config']}`, started {doc['started_at']}, "
+    dry = " as a DRY RUN (2 steps per fit on a few episodes: shapes, not results)" if doc.get(
+        "dry_run") else ""
+    summary = (f"config `{doc['config']}`{dry}, started {doc['started_at']}, "
                f"{doc['seconds']:.0f} s, {state}")
     md, page = out / "report.md", out / "report.html"
     md.write_text(_markdown(out, summary, tables, figures))
@@ -62,14 +71,39 @@ def _stages(doc: dict) -> Table:
     return Table("Stages", ("stage", "status", "seconds", "command"), rows)
 
 
+def _round(name: str, prefix: str = "") -> str | None:
+    """N of a DAgger round's name ``{prefix}rN`` (``fit-r2``); None for any other name."""
+    match = re.fullmatch(rf"{re.escape(prefix)}r(\d+)", name)
+    return match and match.group(1)
+
+
+def _crafterplay(title: str, made_by: str, manifest: dict) -> tuple[str, ...]:
+    shards = manifest["shards"]
+    return (title, made_by, str(sum(s["episodes"] for s in shards)),
+            str(sum(s["steps"] for s in shards)),
+            f"{len(shards)} shards, {sum(s['bytes'] for s in shards) / 1e6:.1f} MB")
+
+
+def _rollouts(n: str, manifest: dict) -> tuple[str, ...]:
+    """A DAgger round's shards: who played, and how often the learner chose the expert's label."""
+    config, shards = nest_dagger(manifest["config"]), manifest["shards"]
+    dagger = config["dagger"]
+    steps = sum(s["steps"] for s in shards)
+    agreed = sum(s["dagger"]["learner_agreement"] * s["steps"] for s in shards) / max(steps, 1)
+    return _crafterplay(f"DAgger rollouts, round {n}",
+                        f"C-VPT, {config['expert']} expert labels, β {dagger['beta']} per "
+                        f"{dagger['mix']}, {config['env']}; learner = label on {agreed:.1%}",
+                        manifest)
+
+
 def _data(records: dict) -> Table:
     rows = []
     play = _json(records.get("generate"))
     if play is not None:
-        shards = play["shards"]
-        rows.append(("CrafterPlay", f"{play['config']['expert']} expert, {play['config']['env']}",
-                     str(sum(s["episodes"] for s in shards)), str(sum(s["steps"] for s in shards)),
-                     f"{len(shards)} shards, {sum(s['bytes'] for s in shards) / 1e6:.1f} MB"))
+        rows.append(_crafterplay(
+            "CrafterPlay", f"{play['config']['expert']} expert, {play['config']['env']}", play))
+    rows += [_rollouts(n, manifest) for name, record in records.items()
+             if (n := _round(name, "dagger-")) and (manifest := _json(record)) is not None]
     caption = _json(records.get("caption"))
     if caption is not None:
         for split, meta in caption["splits"].items():
@@ -80,7 +114,7 @@ def _data(records: dict) -> Table:
 
 
 def _checkpoint_numbers(path: Path) -> tuple[int, str, str, int]:
-    """(step, monitor, best score, last step) of a ``zoo fit`` best checkpoint."""
+    """(step, monitor, best score, last step) of a ``zoo fit`` checkpoint (best or last)."""
     from zoo.weights.checkpoint_io import read_torch_file
 
     best = read_torch_file(path, mmap=True)
@@ -94,24 +128,27 @@ def _checkpoint_numbers(path: Path) -> tuple[int, str, str, int]:
 
 def _models(records: dict) -> Table:
     rows = []
-    for name, title in (("cvpt", "C-VPT"), ("cclip", "C-CLIP"), ("csteve1", "C-Steve-1"),
-                        ("prior", "CVAE prior")):
+    titles = {"cvpt": "C-VPT", "cclip": "C-CLIP", "csteve1": "C-Steve-1", "prior": "CVAE prior",
+              **{name: ROUND_TITLE.format(n) for name in records if (n := _round(name, "fit-"))}}
+    for name, title in titles.items():
         record = records.get(name)
         if record is None or record.get("status") not in ("ran", "skipped"):
             continue
         step, monitor, score, last = _checkpoint_numbers(Path(record["key"]))
         rows.append((title, f"`{record['key']}`", str(step), str(last), monitor, score))
-    headers = ("model", "checkpoint (best by validation)", "its step", "steps trained",
-               "validation metric", "best value")
+    headers = ("model", "checkpoint (suite: best by validation; DAgger: last)", "its step",
+               "steps trained", "validation metric", "best value")
     return Table("Models", headers, rows)
 
 
 def _scores(records: dict) -> Table:
+    """Every ``eval-WHO-GAME`` stage of a game (not a task, not retrieval), in stage order."""
     rows = []
     for name, record in records.items():
-        if not name.startswith(("eval-scripted-", "eval-cvpt-")) or (rep := _json(record)) is None:
+        who, _, game = name.removeprefix("eval-").rpartition("-")
+        if not name.startswith("eval-") or game not in ENV_NAMES or (rep := _json(record)) is None:
             continue
-        title = AGENT_TITLES.get(name.split("-")[1], name)
+        title = AGENT_TITLES.get(who) or (ROUND_TITLE.format(n) if (n := _round(who)) else who)
         rows.append((title, rep["env"], str(rep["episodes"]), _pm(rep["crafter_score"]),
                      _pm(rep["normalized_return"]), f"{rep['episode_length']['mean']:.0f}",
                      f"{rep['episode_end_percent']['survived']:.0f}"))

@@ -2,7 +2,8 @@
 ``pipeline.json``.
 
 A stage is skipped when ``pipeline.json`` records it as finished with the same command and the
-same inputs (the sha256 of the key file of every stage it reads), its output passes its check,
+same inputs (the sha256 of the key file of every stage it reads, and of each input from outside
+the pipeline, like a DAgger run's first learner), its output passes its check,
 and its own key file still has the recorded sha256. Content hashes, not times: a stage made
 again with the same bytes (data generation is deterministic) leaves the stages after it alone,
 while a retrained model (a new checkpoint) makes everything that reads it run again.
@@ -27,7 +28,9 @@ from pathlib import Path
 
 from zoo.files import atomic_write_text, sha256_file
 from zoo.pipeline.checks import Bad, Incomplete, Missing
-from zoo.pipeline.config import PipelineConfig
+from zoo.pipeline.config import DaggerPipelineConfig, PipelineConfig
+from zoo.pipeline.dagger import dagger_plan
+from zoo.pipeline.dry_run import changes, dry_plan, write_clip_init
 from zoo.pipeline.stages import Keys, Stage, plan
 
 PIPELINE_JSON = "pipeline.json"
@@ -35,10 +38,20 @@ FINISHED = ("ran", "skipped")
 Call = Callable[[list[str]], str | None]  # runs one stage's argv; None, or why it failed
 
 
-def run_pipeline(config: PipelineConfig, config_path: Path, out: Path) -> dict:
-    """Run every enabled stage of ``config`` into ``out``; the pipeline.json document."""
-    header = {"config": str(config_path), "settings": asdict(config)}
-    return run_stages(plan(config, out), out, header)
+def run_pipeline(config: PipelineConfig | DaggerPipelineConfig, config_path: Path,
+                 out: Path, dry_of: PipelineConfig | None = None) -> dict:
+    """Run every enabled stage of ``config`` into ``out``; the pipeline.json document.
+    ``dry_of``: the config that ``config`` is the dry run of (``zoo.pipeline.dry_run``), whose
+    differences pipeline.json records under ``dry_run``."""
+    dagger = isinstance(config, DaggerPipelineConfig)
+    header = {"config": str(config_path), "kind": "dagger" if dagger else None}
+    if dry_of is not None:
+        header["dry_run"] = {"changes": changes(dry_of, config),
+                             "clip_init": str(write_clip_init(out))}
+        stages = dry_plan(config, out)
+    else:
+        stages = dagger_plan(config, out) if dagger else plan(config, out)
+    return run_stages(stages, out, {**header, "settings": asdict(config)})
 
 
 def run_stages(stages: list[Stage], out: Path, header: dict, call: Call | None = None) -> dict:
@@ -82,6 +95,12 @@ def _run_stage(stage: Stage, keys: Keys, sums: dict[str, str], before: dict | No
     argv = stage.command(keys)
     record = {"name": stage.name, "command": "zoo " + shlex.join(argv), "argv": argv,
               "needs": {name: sums[name] for name in stage.needs}, "output": str(stage.output)}
+    try:
+        record["needs"].update(_fingerprints(stage.reads))
+    except OSError as err:
+        message = f"an input from outside the pipeline is unreadable: {err}"
+        print(f"zoo pipeline: {stage.name} failed: {message}", file=sys.stderr, flush=True)
+        return {**record, "status": "failed", "message": message, "seconds": 0.0}
     action, why, key = _decide(stage, record, before)
     if action == "skip":
         print(f"\n= {stage.name}: up to date, skipped ({key})", flush=True)
@@ -141,6 +160,19 @@ def _decide(stage: Stage, record: dict, before: dict | None) -> tuple[str, str, 
     if sha256_file(key) != before.get("sha256"):
         return "bad", f"{key} changed since it was made (sha256 differs from the record)", None
     return "skip", "", key
+
+
+def _fingerprints(paths: tuple[Path, ...]) -> dict[str, str]:
+    """path -> sha256 of each input from outside the pipeline: a file's own, an export folder's
+    ``sha256.txt``'s (``zoo.weights.export.checkpoint_sha256``, as DAgger manifests record it)."""
+    if not paths:
+        return {}
+    from zoo.weights.export import checkpoint_sha256
+
+    for path in paths:
+        if not path.exists():
+            raise FileNotFoundError(f"{path} does not exist")
+    return {str(path): checkpoint_sha256(path) for path in paths}
 
 
 def call_zoo(argv: list[str]) -> str | None:

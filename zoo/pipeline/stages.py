@@ -1,5 +1,6 @@
 """The stages of ``zoo pipeline``: each one ordinary ``zoo`` command, its output folder, the
-stages it reads, and the check that says whether its output is there and intact.
+stages it reads, and the check that says whether its output is there and intact. ``plan`` is
+the suite's; ``fit_stage`` and ``score_stage`` are shared with DAgger's (``zoo.pipeline.dagger``).
 
 Layout under ``--out``: ``data/`` (crafterplay, craftercaption, embed, prior_pairs), ``runs/``
 (one folder per trained model, holding the one run LightningCLI made), ``eval/`` (one report
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 
-import zoo.pipeline.checks as checks
+import zoo.pipeline.checks as checks  # noqa: PLR0402 - `from zoo.pipeline import` is a cycle
 from zoo.envs import ENV_NAMES
 from zoo.pipeline.config import PipelineConfig
 
@@ -42,6 +43,9 @@ class Stage:
     """An interrupted run is finished in place by the same command (the data commands)."""
     finish: Callable[[Path], None] | None = None
     """Makes the key file from what the command wrote (the retrieval stage's report.json)."""
+    reads: tuple[Path, ...] = ()
+    """Inputs made outside the pipeline (a DAgger run's first learner and expert data): their
+    fingerprints count with those of ``needs``."""
 
 
 def plan(config: PipelineConfig, out: Path) -> list[Stage]:
@@ -53,11 +57,11 @@ def plan(config: PipelineConfig, out: Path) -> list[Stage]:
               resumable=True),
         Stage("caption", ("generate",), caption, lambda keys: _caption(config, play, caption),
               checks.craftercaption, resumable=True),
-        _fit("cvpt", config.cvpt_config, config.cvpt_args, runs, ("generate",),
-             # sources=null: the pipeline's own data replaces a config's several sources
-             lambda keys: [f"--data.init_args.root={play}", "--data.init_args.sources=null"]),
-        _fit("cclip", config.cclip_config, config.cclip_args, runs, ("caption",),
-             lambda keys: [f"--data.init_args.root={caption}"]),
+        fit_stage("cvpt", config.cvpt_config, config.cvpt_args, runs, ("generate",),
+                  # sources=null: the pipeline's own data replaces a config's several sources
+                  lambda keys: [f"--data.init_args.root={play}", "--data.init_args.sources=null"]),
+        fit_stage("cclip", config.cclip_config, config.cclip_args, runs, ("caption",),
+                  lambda keys: [f"--data.init_args.root={caption}"]),
         *(_score(config, evals, "scripted", game) for game in ENV_NAMES),
         *(_score(config, evals, "cvpt", game) for game in ENV_NAMES),
         _retrieval(config, evals / "cclip-retrieval", caption),
@@ -81,32 +85,40 @@ def _caption(config: PipelineConfig, play: Path, caption: Path) -> list[str]:
             "--val-episodes", str(config.val_episodes), "--per-shard", str(config.per_shard)]
 
 
-def _fit(name: str, config_path: str, args: str, runs: Path, needs: tuple[str, ...],
-         wiring: Callable[[Keys], list[str]], enabled: bool = True) -> Stage:
-    """``zoo fit`` of model ``name`` (an export kind) into ``runs/name``: the config, then the
-    user's overrides, then the paths that wire it to the other stages (those win)."""
+def fit_stage(name: str, config_path: str, args: str, runs: Path, needs: tuple[str, ...],
+              wiring: Callable[[Keys], list[str]], enabled: bool = True, *,
+              kind: str | None = None, weights: str = "best-*.ckpt",
+              reads: tuple[Path, ...] = ()) -> Stage:
+    """``zoo fit`` into ``runs/name``: the config, then the user's overrides, then the paths
+    that wire it to the other stages (those win). Its key is the run's ``checkpoints/<weights>``
+    (default: the one validation chose), rebuilt as a ``kind`` network (default: ``name``)."""
     output = runs / name
 
     def command(keys: Keys) -> list[str]:
         return ["fit", f"--config={config_path}", *shlex.split(args),
                 f"--trainer.default_root_dir={output}", *wiring(keys)]
 
-    return Stage(name, needs, output, command, partial(checks.checkpoint, kind=name), enabled)
+    check = partial(checks.checkpoint, kind=kind or name, pattern=weights)
+    return Stage(name, needs, output, command, check, enabled, reads=reads)
+
+
+def score_stage(name: str, output: Path, needs: tuple[str, ...],
+                agent: Callable[[Keys], list[str]], options: list[str]) -> Stage:
+    """Crafter Score: ``zoo eval AGENT OPTIONS --out OUTPUT``, verified by its report."""
+    return Stage(name, needs, output,
+                 lambda keys: ["eval", *agent(keys), *options, "--out", str(output)],
+                 partial(checks.report, field="crafter_score"))
 
 
 def _score(config: PipelineConfig, evals: Path, agent: str, game: str) -> Stage:
     """Crafter Score of the scripted expert (the reference row, state only) or the C-VPT."""
-    output = evals / f"{agent}-{game}"
-    common = ["--env", game, "--episodes", str(config.eval_episodes),
-              "--max-steps", str(config.eval_max_steps), "--seed", str(config.seed),
-              "--out", str(output)]
+    options = ["--env", game, "--episodes", str(config.eval_episodes),
+               "--max-steps", str(config.eval_max_steps), "--seed", str(config.seed)]
     if agent == "scripted":
-        return Stage(f"eval-scripted-{game}", (), output,
-                     lambda keys: ["eval", "--agent", "scripted", "--no-gif", *common],
-                     partial(checks.report, field="crafter_score"))
-    return Stage(f"eval-cvpt-{game}", ("cvpt",), output,
-                 lambda keys: ["eval", "--checkpoint", str(keys["cvpt"]), *common],
-                 partial(checks.report, field="crafter_score"))
+        return score_stage(f"eval-scripted-{game}", evals / f"scripted-{game}", (),
+                           lambda keys: ["--agent", "scripted", "--no-gif"], options)
+    return score_stage(f"eval-cvpt-{game}", evals / f"cvpt-{game}", ("cvpt",),
+                       lambda keys: ["--checkpoint", str(keys["cvpt"])], options)
 
 
 def _retrieval(config: PipelineConfig, output: Path, caption: Path) -> Stage:
@@ -178,14 +190,15 @@ def _steve(config: PipelineConfig, data: Path, runs: Path, evals: Path, play: Pa
               lambda keys: ["goals", "embed", "--checkpoint", str(keys["cclip"]), "--src",
                             str(play), "--out", str(embed), "--device", config.device],
               partial(checks.embeddings, play=play), on, resumable=True),
-        _fit("csteve1", config.csteve1_config, config.csteve1_args, runs,
-             ("generate", "embed", "cvpt"),
-             lambda keys: [f"--data.init_args.root={play}", f"--data.init_args.embeddings={embed}",
-                           f"--model.init_args.backbone={keys['cvpt']}",
-                           f"--model.init_args.goal_dim={width(keys['embed'])}"], on),
+        fit_stage("csteve1", config.csteve1_config, config.csteve1_args, runs,
+                  ("generate", "embed", "cvpt"),
+                  lambda keys: [f"--data.init_args.root={play}",
+                                f"--data.init_args.embeddings={embed}",
+                                f"--model.init_args.backbone={keys['cvpt']}",
+                                f"--model.init_args.goal_dim={width(keys['embed'])}"], on),
         Stage("prior-pairs", ("caption", "cclip"), pairs, pairs_argv, checks.prior_pairs, on),
-        _fit("prior", config.prior_config, config.prior_args, runs, ("prior-pairs",),
-             prior_wiring, on),
+        fit_stage("prior", config.prior_config, config.prior_args, runs, ("prior-pairs",),
+                  prior_wiring, on),
         Stage(f"eval-csteve1-{config.task}", ("csteve1", "cclip", "prior"), task_out, task_argv,
               partial(checks.report, field="success_percent"), on),
     ]
