@@ -60,6 +60,29 @@ RUN_DIR_ENV = "ZOO_RUN_DIR"  # a run folder chosen by the user: every rank write
 _LAUNCHED_RUN_DIR = "_ZOO_LAUNCHED_RUN_DIR"  # rank 0's folder, inherited by ranks it launches
 
 
+class ZooTrainer(L.Trainer):
+    """Lightning's Trainer with its batch limits typed int-first: ``typing`` caches
+    ``Union[int, float]`` and ``Union[float, int]`` as one object, so once another library has
+    built the float-first one (JAX does, in ``zoo pipeline``'s data stages), jsonargparse reads
+    ``limit_val_batches=1`` as 1.0, which Lightning takes as every batch."""
+
+    def __init__(
+        self,
+        *,
+        limit_train_batches: int | float | None = None,
+        limit_val_batches: int | float | None = None,
+        limit_test_batches: int | float | None = None,
+        limit_predict_batches: int | float | None = None,
+        overfit_batches: int | float = 0.0,
+        **kwargs,
+    ) -> None:
+        super().__init__(
+            limit_train_batches=limit_train_batches, limit_val_batches=limit_val_batches,
+            limit_test_batches=limit_test_batches, limit_predict_batches=limit_predict_batches,
+            overfit_batches=overfit_batches, **kwargs,
+        )
+
+
 class ZooCLI(LightningCLI):
     """Puts each run in its own folder: ``<trainer.default_root_dir>/<time>-<pid>``.
 
@@ -191,6 +214,7 @@ def run_lightning_cli(argv: list[str]) -> LightningCLI:
         cli = ZooCLI(
             L.LightningModule,
             L.LightningDataModule,
+            trainer_class=ZooTrainer,
             subclass_mode_model=True,
             subclass_mode_data=True,
             save_config_callback=WandbSaveConfigCallback,
