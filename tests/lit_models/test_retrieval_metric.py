@@ -1,12 +1,12 @@
 """GroupedRetrieval: the torchmetrics wrapper of zoo.eval.retrieval, against a hand-checked case."""
 
-import os
-import socket
+import json
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 import torch
-import torch.distributed as dist
-import torch.multiprocessing as mp
 
 from lit_models.retrieval_metric import GroupedRetrieval
 from zoo.eval.retrieval import grouped_retrieval_metrics
@@ -69,7 +69,14 @@ def test_states_stay_out_of_checkpoints():
     assert metric.state_dict() == {}
 
 
-def _ddp_worker(rank: int, port: int, results: dict) -> None:
+DDP_SCRIPT = """
+import json, os, socket, sys
+import torch.distributed as dist
+import torch.multiprocessing as mp
+sys.path.insert(0, sys.argv[1])
+from test_retrieval_metric import GroupedRetrieval, update_in_batches
+
+def worker(rank, port, results):
     os.environ.update(MASTER_ADDR="127.0.0.1", MASTER_PORT=str(port))
     dist.init_process_group("gloo", rank=rank, world_size=2)
     try:
@@ -81,15 +88,26 @@ def _ddp_worker(rank: int, port: int, results: dict) -> None:
     finally:
         dist.destroy_process_group()
 
-
-def test_ddp_sync_gathers_every_rank_in_rank_order():
+if __name__ == "__main__":
     with mp.Manager() as manager:
         results = manager.dict()
         with socket.socket() as free:  # a port nobody uses, for the two ranks to meet on
             free.bind(("127.0.0.1", 0))
             port = free.getsockname()[1]
-        # fork: a spawned child could not import this test module (tests/ is no package)
-        mp.start_processes(_ddp_worker, args=(port, results), nprocs=2, start_method="fork")
-        results = dict(results)
+        mp.start_processes(worker, args=(port, results), nprocs=2, start_method="fork")
+        print(json.dumps({str(k): v for k, v in dict(results).items()}))
+"""
+
+
+def test_ddp_sync_gathers_every_rank_in_rank_order(tmp_path):
+    # Two gloo ranks forked from a fresh interpreter: forking this one, where JAX may already
+    # run threads, can deadlock the children.
+    script = tmp_path / "ddp_sync.py"
+    script.write_text(DDP_SCRIPT)
+    run = subprocess.run([sys.executable, str(script), str(Path(__file__).parent)],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    results = {k: v for k, v in json.loads(run.stdout.strip().splitlines()[-1]).items()}
+    results = {int(k) if k.isdigit() else k: v for k, v in results.items()}
     assert results[0] == results[1] == pytest.approx(EXPECTED)
     assert results["local0"] == 4 and results["local1"] == 3  # each rank keeps its own clips
