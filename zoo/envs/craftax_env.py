@@ -168,6 +168,8 @@ class CraftaxEnv:
             # function compile twice: once for reset's output, once for step's.
             return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=jnp.asarray(x).dtype), state)
 
+        # World generation runs env by env (lax.map), not under vmap: on XLA:CPU the vmapped
+        # generator gave envs 9+ worlds that depended on the batch size (CHANGELOG).
         def reset_one(seed):
             key = jax.random.PRNGKey(seed)
             key, world_key = jax.random.split(key)
@@ -181,7 +183,7 @@ class CraftaxEnv:
 
         @partial(jax.jit, donate_argnums=(0, 1))
         def reset_batch(states, keys, seeds, mask):
-            new_states, new_keys = jax.vmap(reset_one)(seeds)
+            new_states, new_keys = jax.lax.map(reset_one, seeds)
             pick = lambda new, old: jnp.where(  # noqa: E731
                 mask.reshape((-1,) + (1,) * (new.ndim - 1)), new, old
             )
@@ -198,7 +200,7 @@ class CraftaxEnv:
 
         @jax.jit
         def fresh(seeds):
-            return jax.vmap(reset_one)(seeds)
+            return jax.lax.map(reset_one, seeds)
 
         self._jax = jax
         self._reset_batch = reset_batch
