@@ -10,49 +10,71 @@ never reads them.
 
 A rendered chunk stores each frame as the residual (frame - re-render) mod 256, coded like
 frames. Where the re-render reproduces the frame the residual is zero and costs almost
-nothing; where it does not (the env rendered on another backend, an XLA fusion rounded a
-pixel the other way) the residual holds the difference, so decoding is bit-exact whenever
-the reader's re-render equals the writer's. Both therefore re-render on the CPU backend, and
-each chunk carries the CRC32 of its frames: a reader whose re-render differs (another
-craftax or JAX version, another CPU) fails with an error naming both renderer versions
-instead of returning wrong pixels.
+nothing; where it does not (the env rendered on a GPU, another XLA fusion rounded a pixel the
+other way) the residual holds the difference, so decoding is bit-exact whenever the reader's
+re-render equals the writer's. Each chunk carries the CRC32 of its frames: a reader whose
+re-render differs (another craftax or JAX version, another CPU) fails with an error naming
+both renderer versions instead of returning wrong pixels.
 
-JAX is imported inside functions: DataLoader workers are spawned and pay for it only when
-they meet a rendered chunk.
+Re-renders use the renderer ``zoo.envs.render.choose_renderer`` picks for the CPU: the numba
+kernel (default), bit-exact with Craftax's JAX renderer on the CPU backend, so a chunk written
+with either decodes with the other; or that JAX renderer, 16 frames per jitted call on the CPU
+backend. A chunk whose residual is zero (the usual case) is coded and recognised without
+coding or decoding its zeros. JAX is imported inside functions: DataLoader workers are spawned
+and pay for it only when they meet a rendered chunk.
 """
 
 from __future__ import annotations
 
-import zlib
 from functools import lru_cache
 from importlib import metadata
 
 import numpy as np
 
 from zoo.data.codec import FrameCodec, decode_arrays, decode_frames, encode_arrays, encode_frames
+from zoo.envs import render
 from zoo.envs.constants import Item
+from zoo.envs.render import checksum
 from zoo.envs.schema import FRAME_SHAPE, State
 
 RENDER_BATCH = 16
-"""Frames per jitted call: one compiled shape for every chunk length (the tail is padded).
-On a 2-core CPU 16 renders ~1,800 frames/s, 64 half that (the intermediates leave the cache)."""
-STATE_INPUTS = (
-    "map", "player_pos", "player_dir", "player_vitals", "player_sleeping", "inventory",
-    "light_level", "arrows_dir",
-    *(f"{mob}_{part}" for mob in ("zombies", "cows", "skeletons", "arrows")
-      for part in ("pos", "status")),
-)
-"""Exported state fields the renderer reads (the rest of the state is not sent to JAX)."""
+"""Frames per re-render call: a block still in the cache when its residual and CRC32 are
+taken; for JAX also one compiled shape for every chunk length (the tail is padded; on a
+2-core CPU 16 renders ~1,800 frames/s, 64 half that: the intermediates leave the cache)."""
 
 
-def renderer_version() -> str:
-    """The packages that decide a re-render's pixels, for the manifest and chunk meta."""
-    return f"craftax {metadata.version('craftax')}, jax {metadata.version('jax')}"
+def renderer_version(renderer: str | None = None) -> str:
+    """What decides a re-render's pixels, for the manifest and chunk meta: craftax's version
+    and the renderer's (``renderer`` None: the one chosen for the CPU)."""
+    craftax = f"craftax {metadata.version('craftax')}"
+    if render.choose_renderer(renderer) == "numba":
+        return f"{craftax}, zoo numba renderer {render.NUMBA_RENDERER_VERSION}"
+    return f"{craftax}, jax {metadata.version('jax')}"
 
 
-def frames_crc32(frames: np.ndarray) -> int:
-    """CRC32 of a chunk's frames (~3 GB/s): the check that a re-render matched the writer's."""
-    return zlib.crc32(np.ascontiguousarray(frames))
+_ZERO_CODED: set[bytes] = set()
+"""Coded residuals seen to be all zeros: every chunk of one length and codec codes its zeros to
+the same ~500 bytes, so after the first such chunk a set lookup replaces decoding them."""
+_MAX_ZERO_CODED = 4096
+
+
+@lru_cache(maxsize=64)
+def _coded_zeros(n: int, codec: FrameCodec) -> bytes:
+    """The coded residual of n frames the re-render reproduces: what ``encode_frames`` makes
+    of n zero frames, computed once per chunk length."""
+    return encode_frames(np.zeros((n, *FRAME_SHAPE), np.uint8), codec)
+
+
+def _decode_residual(residual: bytes, n: int) -> np.ndarray | None:
+    """The residual frames, or None where they are all zero (the common case)."""
+    if residual in _ZERO_CODED:
+        return None
+    frames = decode_frames(residual, n)
+    if frames.any():
+        return frames
+    if len(_ZERO_CODED) < _MAX_ZERO_CODED:
+        _ZERO_CODED.add(residual)
+    return None
 
 
 def rebuild_env_state(state: dict, state_rng, template):
@@ -122,15 +144,22 @@ def _batch_renderer():
     return jax.jit(jax.vmap(render_one)), jax.devices("cpu")[0]
 
 
-def render_frames(state: State, state_rng: np.ndarray) -> np.ndarray:
+def render_frames(state: State, state_rng: np.ndarray, renderer: str | None = None) -> np.ndarray:
     """Re-render (n, 144, 144, 3) uint8 frames from n steps of exported state and their
-    (n, 2) uint32 ``state_rng``, RENDER_BATCH frames per call on the CPU backend."""
+    (n, 2) uint32 ``state_rng`` on the CPU (``renderer`` None: ``choose_renderer``'s)."""
+    if render.choose_renderer(renderer) == "numba":
+        return render.render_frames(state, state_rng)
+    return _render_jax(state, state_rng)
+
+
+def _render_jax(state: State, state_rng: np.ndarray) -> np.ndarray:
+    """Craftax's JAX renderer, RENDER_BATCH frames per call on the CPU backend."""
     import jax
 
-    render, cpu = _batch_renderer()
+    render_batch, cpu = _batch_renderer()
     n = len(state_rng)
     out = np.empty((n, *FRAME_SHAPE), np.uint8)
-    inputs = {k: np.asarray(state[k]) for k in STATE_INPUTS}
+    inputs = {k: np.asarray(state[k]) for k in render.STATE_INPUTS}
     for start in range(0, n, RENDER_BATCH):
         stop = min(start + RENDER_BATCH, n)
         pad = [(0, RENDER_BATCH - (stop - start))]
@@ -138,8 +167,17 @@ def render_frames(state: State, state_rng: np.ndarray) -> np.ndarray:
             {k: np.pad(v[start:stop], pad + [(0, 0)] * (v.ndim - 1)) for k, v in inputs.items()},
             np.pad(state_rng[start:stop], pad + [(0, 0)]),
         ]
-        out[start:stop] = jax.device_get(render(*jax.device_put(block, cpu)))[: stop - start]
+        out[start:stop] = jax.device_get(render_batch(*jax.device_put(block, cpu)))[: stop - start]
     return out
+
+
+def _rerender_blocks(state: State, state_rng: np.ndarray):
+    """(block, its re-rendered frames) over a chunk, RENDER_BATCH frames at a time: each
+    block is still in the cache when its residual and CRC32 are taken."""
+    inputs = {k: state[k] for k in render.STATE_INPUTS}
+    for start in range(0, len(state_rng), RENDER_BATCH):
+        block = slice(start, start + RENDER_BATCH)
+        yield block, render_frames({k: v[block] for k, v in inputs.items()}, state_rng[block])
 
 
 def encode_rendered(
@@ -150,12 +188,20 @@ def encode_rendered(
     ``frames`` None: the env drew no frames (a state-only expert played), so the frames are
     the re-renders themselves and the residual is zero: generation renders each frame once.
     """
-    rendered = render_frames(state, state_rng)
-    if frames is None:
-        frames = rendered
-    residual = frames - rendered  # uint8 wraps: mod 256
+    rendered = None if frames is None else np.empty_like(frames)
+    same, crc = True, 0
+    for block, part in _rerender_blocks(state, state_rng):
+        if frames is not None:
+            rendered[block] = part
+            same = same and np.array_equal(frames[block], part)
+            part = frames[block]
+        crc = checksum.crc32(part, crc)
+    if same:
+        coded = _coded_zeros(len(state_rng), codec)
+    else:
+        coded = encode_frames(frames - rendered, codec)  # uint8 wraps: mod 256
     inputs = encode_arrays({"state_rng": np.asarray(state_rng, np.uint32)}, codec)
-    return encode_frames(residual, codec), inputs, frames_crc32(frames)
+    return coded, inputs, crc
 
 
 def decode_rendered(
@@ -166,12 +212,18 @@ def decode_rendered(
     if state_rng is None or state_rng.shape != (n, 2) or state_rng.dtype != np.uint32:
         got = "nothing" if state_rng is None else f"{state_rng.dtype} {state_rng.shape}"
         raise ValueError(f"render inputs: 'state_rng' is {got}, expected uint32 ({n}, 2)")
-    frames = decode_frames(residual, n)
-    frames += render_frames(state, state_rng)
-    if frames_crc32(frames) != crc32:
+    nonzero = _decode_residual(residual, n)
+    frames = np.empty((n, *FRAME_SHAPE), np.uint8)
+    crc = 0
+    for block, part in _rerender_blocks(state, state_rng):
+        if nonzero is not None:
+            part += nonzero[block]
+        frames[block] = part
+        crc = checksum.crc32(part, crc)
+    if crc != crc32:
         raise ValueError(
             f"frames re-rendered here differ from the writer's (CRC32 mismatch; written with "
-            f"{renderer}, read with {renderer_version()} on the CPU backend): decode these "
-            "shards where they were written, or regenerate them with --frames stored"
+            f"{renderer}, read with {renderer_version()} on the CPU): decode these shards "
+            "where they were written, or regenerate them with --frames stored"
         )
     return frames

@@ -1,7 +1,9 @@
 """Craftax-Classic (JAX) as N batched envs with 144x144 pixels and the zoo's state schema.
 
-One jitted call steps every env, renders its frame from the state (16-pixel blocks, the
-paper's setting) and exports the schema arrays, so a batch costs one device round trip.
+One jitted call steps every env and exports the schema arrays, so a batch costs one device
+round trip. Frames (16-pixel blocks, the paper's setting) are drawn from the exported state by
+the renderer ``zoo.envs.render.choose_renderer`` picks: the numba kernel on the CPU (the same
+pixels, tens of times faster), or Craftax's JAX renderer inside the jitted step.
 Each env carries its own PRNG key seeded from its episode seed: an episode's course depends
 on its seed and its actions only, never on which slot or batch size it ran in.
 """
@@ -19,6 +21,7 @@ import numpy as np  # noqa: E402
 
 from zoo.envs.base import Step, check_actions, check_seeds  # noqa: E402
 from zoo.envs.constants import Block, Mob  # noqa: E402
+from zoo.envs.render import choose_renderer, render_frames  # noqa: E402
 from zoo.envs.schema import (  # noqa: E402
     MAX_ARROWS,
     MAX_COWS,
@@ -43,7 +46,8 @@ def enable_compilation_cache(path: str | None = None) -> None:
 
 
 def frame_renderer():
-    """Craftax's pixel renderer at the zoo's block size, as the uint8 frame the envs return.
+    """Craftax's JAX pixel renderer at the zoo's block size, as the uint8 frame the envs
+    return (the ``jax`` renderer; ``zoo.envs.render`` draws the same pixels with numba).
 
     One definition for the env and for frames re-rendered from stored states
     (``zoo.data.rerender``), so both round and clip alike.
@@ -137,13 +141,18 @@ class CraftaxEnv:
 
     Args:
         num_envs: envs stepped together.
-        pixels: render 144x144 frames (set False for state-only experts: ~3x faster).
+        pixels: render 144x144 frames (set False for state-only experts).
         max_steps: episode length limit (crafter's and the paper's: 10,000).
+        renderer: "numba" or "jax"; None: ``choose_renderer``'s choice ($ZOO_RENDERER, else
+            numba, or jax when JAX runs on a GPU).
     """
 
     name = "craftax"
 
-    def __init__(self, num_envs: int, pixels: bool = True, max_steps: int = 10_000) -> None:
+    def __init__(
+        self, num_envs: int, pixels: bool = True, max_steps: int = 10_000,
+        renderer: str | None = None,
+    ) -> None:
         import jax
         import jax.numpy as jnp
         from craftax.craftax_classic.envs.craftax_state import EnvParams, StaticEnvParams
@@ -155,9 +164,12 @@ class CraftaxEnv:
         enable_compilation_cache()
         self.num_envs = num_envs
         self.pixels = pixels
+        self.renderer = (
+            choose_renderer(renderer, on_gpu=jax.default_backend() != "cpu") if pixels else None
+        )
         self.params = EnvParams(max_timesteps=max_steps)
         self.static_params = StaticEnvParams()
-        render = frame_renderer() if pixels else None
+        render = frame_renderer() if self.renderer == "jax" else None
         params, static = self.params, self.static_params
 
         def observe(state):
@@ -220,7 +232,7 @@ class CraftaxEnv:
         self._states, self._keys, frames, exported = self._reset_batch(
             self._states, self._keys, seeds32, mask
         )
-        frames, exported = self._jax.device_get((frames, exported))
+        frames, exported = self._fetch(frames, exported)
         zeros = np.zeros(self.num_envs, np.float32)
         return Step(frames, exported, zeros, np.zeros(self.num_envs, bool), self._states)
 
@@ -229,5 +241,14 @@ class CraftaxEnv:
         self._states, self._keys, frames, exported, reward, done = self._step_batch(
             self._states, self._keys, actions
         )
-        frames, exported, reward, done = self._jax.device_get((frames, exported, reward, done))
+        frames, exported = self._fetch(frames, exported)
+        reward, done = self._jax.device_get((reward, done))
         return Step(frames, exported, reward, done, self._states)
+
+    def _fetch(self, frames, exported) -> tuple[np.ndarray | None, dict]:
+        """The step's frames and exported state as numpy; the numba renderer draws the frames
+        here, from the exported state and ``state_rng`` (fetched in the same transfer)."""
+        if self.renderer != "numba":
+            return self._jax.device_get((frames, exported))
+        exported, state_rng = self._jax.device_get((exported, self._states.state_rng))
+        return render_frames(exported, state_rng), exported

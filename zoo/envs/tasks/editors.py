@@ -8,6 +8,7 @@ import numpy as np
 
 from zoo.envs.base import GameEnv, Step
 from zoo.envs.constants import ITEM_NAMES
+from zoo.envs.render import render_frames
 from zoo.envs.tasks.specs import VITAL_MAX, TaskSpec
 
 
@@ -50,8 +51,8 @@ class CrafterEditor(Editor):
 
 @cache
 def _craftax_edit_fn(pixels: bool):
-    """The jitted batched edit (+ render and export). What to edit is all arguments (item
-    counts, which envs to pacify), so every task and every TaskEnv shares one program."""
+    """The jitted batched edit (+ JAX render if ``pixels``, and export). What to edit is all
+    arguments (item counts, which envs to pacify), so every task and TaskEnv shares one program."""
     import jax
     import jax.numpy as jnp
 
@@ -100,7 +101,9 @@ class CraftaxEditor(Editor):
         self._jax = jax
         self._counts = task.inventory_vector().astype(np.int32)
         self._peaceful = task.peaceful
-        self._edit = _craftax_edit_fn(env.pixels)
+        # The frames come from the env's renderer: inside the jitted edit for "jax", from the
+        # exported state afterwards for "numba" (zoo.envs.render), as the env's own steps.
+        self._edit = _craftax_edit_fn(env.renderer == "jax")
 
     def edit(self, step: Step, mask: np.ndarray, inventory: bool) -> None:
         mask = np.asarray(mask, bool)
@@ -109,10 +112,13 @@ class CraftaxEditor(Editor):
         )
         # CraftaxEnv has no setter for its states; the edited pytree replaces them.
         self.env._states = states
-        frames, exported = self._jax.device_get((frames, exported))
+        frames, exported, state_rng = self._jax.device_get((frames, exported, states.state_rng))
         for k, v in exported.items():
             step.state[k][mask] = v[mask]
-        if step.frames is not None:
+        if step.frames is not None and self.env.renderer == "numba":
+            edited = {k: v[mask] for k, v in exported.items()}
+            step.frames[mask] = render_frames(edited, state_rng[mask])
+        elif step.frames is not None:
             step.frames[mask] = frames[mask]
         step.raw = states
 
