@@ -53,7 +53,8 @@ class CSteve1(SequenceBC):
         """Args:
         backbone: the C-VPT to start from: a ``zoo fit`` .ckpt or a ``zoo export`` folder.
         goal_dim: goal embedding width; must equal the C-CLIP embedding size of the data.
-        conditioning: ``head`` (the paper's) or ``trxl_input`` (STEVE-1's; the ablation).
+        conditioning: ``head`` (the paper's), ``trxl_input`` (STEVE-1's; the ablation) or
+            ``film`` (scale and shift after the Transformer-XL: state-dependent, goal-free TrXL).
         head_hidden: width of a trainable hidden layer before C-VPT's linear policy head (VPT's
             head has one; 0: none, and head conditioning is one logit offset per goal).
         lora_rank: LoRA rank on the Transformer-XL (0: train the conditioning layer only).

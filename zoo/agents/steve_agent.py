@@ -173,7 +173,7 @@ class StevePolicy:
 
     @property
     def conditioning(self) -> str:
-        """Where the goal enters: "head" (the paper's) or "trxl_input"."""
+        """Where the goal enters: "head" (the paper's), "film" or "trxl_input"."""
         return self.model.config.conditioning
 
     @property
@@ -190,11 +190,11 @@ class StevePolicy:
         self, frames: np.ndarray, first: np.ndarray, state: TrXLState
     ) -> tuple[torch.Tensor, TrXLState]:
         """(N, d_model) goal-free features of one frame per env (``first`` marks episode
-        starts) and the new memory; head conditioning only."""
-        if self.conditioning != "head":
+        starts) and the new memory; head or FiLM conditioning only."""
+        if not self.model.config.goal_after_trxl:
             raise ValueError(
-                "goal-free features need head conditioning (the paper's); this C-Steve-1 uses "
-                f"{self.conditioning!r}"
+                "goal-free features need head or FiLM conditioning (the goal after the "
+                f"Transformer-XL); this C-Steve-1 uses {self.conditioning!r}"
             )
         frames_t = torch.tensor(np.asarray(frames), device=self.device).unsqueeze(1)
         first_t = torch.as_tensor(first, device=self.device).unsqueeze(1)

@@ -15,6 +15,11 @@ block before the frozen head,
 x'' = x' + W_2 relu(W_1 LayerNorm(x') + b_1) + b_2 with W_2, b_2 zero at the start, so the
 goal's effect can depend on the state and the untrained model is still the backbone.
 
+FiLM conditioning (``film``; beyond the paper) also enters after the Transformer-XL, as a
+per-feature scale and shift, x' = x * (1 + G z_t) + W z_t + b, with G zero at the start: over
+the linear head the goal's effect is W_head (x * G z), which depends on the state through x,
+while the Transformer-XL pass stays goal-free (guidance and PPO-Steve's features as for head).
+
 Fine-tuning is LoRA on the Transformer-XL's linear layers (``peft``), plus the conditioning
 layer (and the head block); the image encoder, the TrXL's base weights, norms and the policy head stay frozen
 (``trainable_parameters`` names what trains).
@@ -38,8 +43,10 @@ from torch import nn
 from zoo.models.cvpt import CVPTModel
 from zoo.models.trxl import TrXLState
 
-Conditioning = Literal["head", "trxl_input"]
-CONDITIONINGS: tuple[str, ...] = ("head", "trxl_input")
+Conditioning = Literal["head", "trxl_input", "film"]
+CONDITIONINGS: tuple[str, ...] = ("head", "trxl_input", "film")
+AFTER_TRXL: tuple[str, ...] = ("head", "film")
+"""Conditionings whose goal enters after a goal-free Transformer-XL pass."""
 
 
 @dataclass
@@ -49,7 +56,8 @@ class SteveConfig:
     goal_dim: int = 512
     """Width of the goal embedding (the C-CLIP embedding size)."""
     conditioning: Conditioning = "head"
-    """``head``: after the Transformer-XL (the paper's); ``trxl_input``: before it (STEVE-1's)."""
+    """``head``: added after the Transformer-XL (the paper's); ``trxl_input``: added before it
+    (STEVE-1's); ``film``: a scale and shift after it (state-dependent over a linear head)."""
     head_hidden: int = 0
     """Width of the trainable hidden layer before the frozen linear policy head (0: none; then
     head conditioning is a state-independent logit offset per goal, see the module doc)."""
@@ -73,6 +81,12 @@ class SteveConfig:
                 f"goal_dim={self.goal_dim} must be >= 1, lora_rank={self.lora_rank} and "
                 f"head_hidden={self.head_hidden} >= 0"
             )
+
+    @property
+    def goal_after_trxl(self) -> bool:
+        """The Transformer-XL never sees the goal: guidance shares its pass, and its features
+        are goal-free (PPO-Steve's planner reads them)."""
+        return self.conditioning in AFTER_TRXL
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -106,6 +120,10 @@ class SteveModel(nn.Module):
         self.condition = nn.Linear(config.goal_dim, backbone.config.d_model)
         nn.init.zeros_(self.condition.weight)
         nn.init.zeros_(self.condition.bias)
+        self.film_scale = None
+        if config.conditioning == "film":
+            self.film_scale = nn.Linear(config.goal_dim, backbone.config.d_model, bias=False)
+            nn.init.zeros_(self.film_scale.weight)
         self.head_block = _head_block(backbone.config.d_model, config.head_hidden)
         if config.lora_rank > 0:
             lora = LoraConfig(
@@ -116,7 +134,7 @@ class SteveModel(nn.Module):
             )
             inject_adapter_in_model(lora, backbone.trxl)
         for name, param in self.named_parameters():
-            trains = name.startswith(("condition.", "head_block.")) or "lora_" in name
+            trains = name.startswith(("condition.", "film_scale.", "head_block.")) or "lora_" in name
             param.requires_grad_(trains)
 
     def trainable_parameters(self) -> dict[str, nn.Parameter]:
@@ -134,6 +152,14 @@ class SteveModel(nn.Module):
             )
         return self.condition(goal.to(self.condition.weight.dtype)).to(like.dtype)
 
+    def _after_trxl(self, hidden: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """Goal-conditioned features from goal-free TrXL features (head or FiLM)."""
+        shifted = hidden + self._goal_term(goal, hidden)
+        if self.film_scale is None:
+            return shifted
+        scale = self.film_scale(goal.to(self.film_scale.weight.dtype)).to(hidden.dtype)
+        return shifted + hidden * scale
+
     def forward(
         self, frames: torch.Tensor, first: torch.Tensor, goal: torch.Tensor, state: TrXLState
     ) -> tuple[torch.Tensor, TrXLState]:
@@ -143,8 +169,8 @@ class SteveModel(nn.Module):
         if self.config.conditioning == "trxl_input":
             x = x + self._goal_term(goal, x)
         hidden, state = self.backbone.trxl(x, first.bool(), state)
-        if self.config.conditioning == "head":
-            hidden = hidden + self._goal_term(goal, hidden)
+        if self.config.goal_after_trxl:
+            hidden = self._after_trxl(hidden, goal)
         return self.head(hidden), state
 
     def head(self, hidden: torch.Tensor) -> torch.Tensor:
@@ -163,11 +189,11 @@ class SteveModel(nn.Module):
     ) -> tuple[torch.Tensor, TrXLState]:
         """Classifier-free guidance: (1 + scale) * cond - scale * uncond logits, one forward.
 
-        ``state`` is the TrXL state of the batch (B envs) for head conditioning, and of the
+        ``state`` is the TrXL state of the batch (B envs) for head or FiLM conditioning, and of the
         doubled batch (B conditional, then B unconditional rows) for TrXL-input conditioning:
         ``guidance_state`` makes the right one.
         """
-        if self.config.conditioning == "head":
+        if self.config.goal_after_trxl:
             hidden, state = self.backbone.features(frames, first, state)
             return self.guided_head(hidden, goal, scale), state
         x = self.backbone.encode_frames(frames)
@@ -178,17 +204,17 @@ class SteveModel(nn.Module):
 
     def guided_head(self, hidden: torch.Tensor, goal: torch.Tensor, scale: float) -> torch.Tensor:
         """Guided logits (B, T, A) from goal-free TrXL features (B, T, d) and goals (B, T, D)
-        (head conditioning): the goal only enters here, so a caller that needs the features
-        too (PPO-Steve's planner) runs the Transformer-XL once."""
-        if self.config.conditioning != "head":
-            raise ValueError("guided_head needs head conditioning; use guided_logits")
-        cond = self.head(hidden + self._goal_term(goal, hidden))
-        uncond = self.head(hidden + self._goal_term(torch.zeros_like(goal), hidden))
+        (head or FiLM conditioning): the goal only enters here, so a caller that needs the
+        features too (PPO-Steve's planner) runs the Transformer-XL once."""
+        if not self.config.goal_after_trxl:
+            raise ValueError("guided_head needs head or FiLM conditioning; use guided_logits")
+        cond = self.head(self._after_trxl(hidden, goal))
+        uncond = self.head(self._after_trxl(hidden, torch.zeros_like(goal)))
         return combine_guidance(cond, uncond, scale)
 
     def guidance_state(self, batch: int, device: torch.device | str | None = None) -> TrXLState:
         """Empty TrXL memory for ``guided_logits`` on ``batch`` envs."""
-        rows = batch if self.config.conditioning == "head" else 2 * batch
+        rows = batch if self.config.goal_after_trxl else 2 * batch
         return self.initial_state(rows, device)
 
 
@@ -209,4 +235,4 @@ def combine_guidance(cond: torch.Tensor, uncond: torch.Tensor, scale: float) -> 
     return (1.0 + scale) * cond - scale * uncond
 
 
-__all__ = ["CONDITIONINGS", "Conditioning", "SteveConfig", "SteveModel", "combine_guidance"]
+__all__ = ["AFTER_TRXL", "CONDITIONINGS", "Conditioning", "SteveConfig", "SteveModel", "combine_guidance"]

@@ -109,10 +109,10 @@ class CaptionExecutor:
     """
 
     def __init__(self, steve, goals: torch.Tensor) -> None:
-        if steve.conditioning != "head":
+        if not steve.model.config.goal_after_trxl:
             raise ValueError(
-                "PPO-Steve reads C-Steve-1's goal-free feature, which needs head conditioning "
-                f"(the paper's); this checkpoint uses {steve.conditioning!r}"
+                "PPO-Steve reads C-Steve-1's goal-free feature, which needs head or FiLM "
+                f"conditioning (the paper's: head); this checkpoint uses {steve.conditioning!r}"
             )
         if goals.ndim != 2 or goals.shape[1] != steve.goal_dim:
             raise ValueError(

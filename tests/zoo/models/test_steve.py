@@ -36,7 +36,7 @@ def _randomise_trainable(model: SteveModel) -> None:
             param.normal_(0, 0.2)
 
 
-VARIANTS = [("head", 0), ("trxl_input", 0), ("head", 16)]  # (conditioning, head_hidden)
+VARIANTS = [("head", 0), ("trxl_input", 0), ("head", 16), ("film", 0)]  # (conditioning, head_hidden)
 
 
 @pytest.mark.parametrize(("conditioning", "head_hidden"), VARIANTS)
@@ -106,6 +106,22 @@ def test_head_goal_effect_depends_on_the_state_only_with_a_hidden_layer(
         assert spread > 0.1
     else:
         assert spread < 1e-5
+
+
+def test_film_goal_effect_depends_on_the_state_over_a_linear_head() -> None:
+    """FiLM scales the TrXL features by the goal, so over the same linear head the goal's
+    logit shift differs from state to state, and equals the linear head's shift of x * G z."""
+    steve = SteveModel(_backbone(), SteveConfig(goal_dim=GOAL_DIM, conditioning="film"))
+    _randomise_trainable(steve)
+    assert "film_scale.weight" in steve.trainable_parameters()
+    hidden = torch.randn(10, 1, 32, generator=torch.Generator().manual_seed(0))
+    goal = torch.randn(1, 1, GOAL_DIM).expand(10, 1, GOAL_DIM)
+    with torch.no_grad():
+        shift = steve.guided_head(hidden, goal, 0.0) - steve.guided_head(hidden, 0 * goal, 0.0)
+        head = steve.backbone.policy_head.weight  # linear: hidden 0
+        expected = (hidden * steve.film_scale(goal) + steve.condition.weight @ goal[0, 0]) @ head.T
+    assert (shift[:, 0] - shift[0, 0]).abs().max().item() > 0.1
+    torch.testing.assert_close(shift, expected, rtol=1e-4, atol=1e-4)
 
 
 def test_combine_guidance_on_fixed_logits() -> None:
