@@ -19,11 +19,13 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable, Iterable, Iterator
 
+import numpy as np
+
 from datamodules.crafterplay import CrafterPlayDataModule
 from zoo.data.manifest import require_manifest
 from zoo.data.sequences import ShardSources
 from zoo.goals.attach import GOAL_KEYS, GoalAttacher, SequenceGoalDrop
-from zoo.goals.embed import check_embeddings_match, load_embedding_manifest
+from zoo.goals.embed import GOAL_DTYPE, check_embeddings_match, load_embedding_manifest
 from zoo.goals.relabel import RelabelMode, RelabelParams, UncondPer
 from zoo.goals.sources import CommandedGoal, GoalSource, GoalSourceParams, caption_goals
 
@@ -45,6 +47,9 @@ class SteveDataModule(CrafterPlayDataModule):
         goal_source: GoalSource = "hindsight",
         commanded_weight: float = 0.5,
         commanded_goal: CommandedGoal = "caption",
+        cclip: str | None = None,
+        prior: str | None = None,
+        prior_samples: int = 32,
         partial_embeddings: bool = False,
         seq_len: int = 640,
         batch_size: int = 128,
@@ -80,7 +85,13 @@ class SteveDataModule(CrafterPlayDataModule):
         commanded_weight: ``mix``: the share of instruction segments with commanded goals.
         commanded_goal: a commanded goal is the ``caption``'s embedding (the mean C-CLIP
             embedding of its clips in ``embeddings``) or the ``completion`` clip's (the step that
-            completed the instruction; segments that did not complete keep hindsight goals).
+            completed the instruction; segments that did not complete keep hindsight goals), or
+            ``prior``: one of ``prior_samples`` goals the ``prior`` gives the caption's text
+            (through ``cclip``'s text tower), drawn per segment: what a typed instruction gives.
+        cclip: C-CLIP checkpoint or export of ``commanded_goal: prior`` (its text tower; the
+            one that embedded ``embeddings``).
+        prior: CVAE prior checkpoint or export of ``commanded_goal: prior``.
+        prior_samples: prior goals drawn per caption, once (seeded by the caption id).
         partial_embeddings: train on the CrafterPlay shards that ``embeddings`` covers (a
             ``zoo goals embed --shards A:B`` run) instead of refusing an incomplete folder.
         seq_len: steps per sequence (paper: 640).
@@ -158,15 +169,44 @@ class SteveDataModule(CrafterPlayDataModule):
         sources = self.goal_sources
         if sources.source == "hindsight":
             return None
-        if require_manifest(self.hparams.root)["config"].get("instructions") is None:
+        schedule = require_manifest(self.hparams.root)["config"].get("instructions")
+        if schedule is None:
             raise ValueError(
                 f"goal_source={sources.source!r} needs goal-directed CrafterPlay, but "
                 f"{self.hparams.root} was generated without instructions (zoo data generate "
                 "--instructions); use goal_source: hindsight"
             )
-        if sources.commanded_goal == "caption" and self._caption_goals is None:
+        if self._caption_goals is None and sources.commanded_goal == "caption":
             self._caption_goals = caption_goals(self.hparams.embeddings)
+        if self._caption_goals is None and sources.commanded_goal == "prior":
+            self._caption_goals = self._prior_goals(schedule["caption_ids"])
         return self._caption_goals
+
+    def _prior_goals(self, caption_ids: list[int]) -> dict[int, np.ndarray]:
+        """caption id -> (prior_samples, D) goals of its text, as SteveAgent draws them."""
+        from zoo.agents.steve_agent import GoalEncoder
+
+        missing = [k for k in ("cclip", "prior") if not self.hparams.get(k)]
+        if missing:
+            raise ValueError(
+                f"commanded_goal='prior' needs data.init_args.{' and '.join(missing)} "
+                "(the C-CLIP and CVAE prior checkpoints that turn a caption's text into goals)"
+            )
+        if self.hparams.prior_samples < 1:
+            raise ValueError(f"prior_samples={self.hparams.prior_samples} must be >= 1")
+        encoder = GoalEncoder.load(self.hparams.cclip, self.hparams.prior)
+        if encoder.goal_dim != self.goal_dim:
+            raise ValueError(
+                f"cclip {self.hparams.cclip} embeds {encoder.goal_dim}-d goals, the embeddings "
+                f"{self.hparams.embeddings} are {self.goal_dim}-d"
+            )
+        goals = {}
+        for caption_id in caption_ids:
+            ids = [int(caption_id)] * self.hparams.prior_samples
+            goals[int(caption_id)] = (
+                encoder.from_caption_ids(ids, seed=int(caption_id)).numpy().astype(GOAL_DTYPE)
+            )
+        return goals
 
     def sequence_stages(self) -> list[Callable[[Iterable[dict]], Iterator[dict]]]:
         if self.relabel_params.uncond_per == "sequence":

@@ -125,3 +125,37 @@ def test_commanded_goals_need_goal_directed_data(steve_play, steve_embeddings) -
     module = _module(steve_play, steve_embeddings, goal_source="mix")
     with pytest.raises(ValueError, match="generated without instructions"):
         module.dataset("train")
+
+
+def test_prior_goals_are_the_priors_goals_of_the_caption_text(
+    play, embeddings, steve_cclip, tmp_path
+) -> None:
+    """``commanded_goal: prior``: a commanded step's goal is what GoalEncoder gives its
+    caption's text, the goal a typed instruction gets at play time."""
+    from zoo.agents.steve_agent import GoalEncoder
+    from zoo.models.prior import CVAEPrior, PriorConfig
+    from zoo.weights.export import save_exported
+
+    torch.manual_seed(0)
+    prior = save_exported(CVAEPrior(PriorConfig(embed_dim=64, hidden=16, latent_dim=4)),
+                          tmp_path / "prior")
+    module = _module(play, embeddings, goal_source="commanded", commanded_goal="prior",
+                     cclip=str(steve_cclip), prior=str(prior), prior_samples=3)
+    encoder = GoalEncoder.load(steve_cclip, prior)
+    episodes = {e["meta"]["episode"]: e for e in iter_episodes(list_shards(play))}
+    checked = 0
+    for episode, step, goal, goal_step, _ in _steps(module):
+        commanded = int(episodes[episode]["instruction"][step])
+        if commanded < 0:
+            continue
+        expected = encoder.from_caption_ids([commanded] * 3, seed=commanded).numpy()
+        assert np.abs(expected - goal).max(axis=1).min() < 2e-3  # one of its 3 samples
+        assert goal_step == -1
+        checked += 1
+    assert checked > 100
+
+
+def test_prior_goals_need_the_checkpoints(play, embeddings) -> None:
+    module = _module(play, embeddings, goal_source="commanded", commanded_goal="prior")
+    with pytest.raises(ValueError, match=r"needs data.init_args.cclip and prior"):
+        module.dataset("train")

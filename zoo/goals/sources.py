@@ -10,6 +10,11 @@ caption, in whatever context the schedule put it, so the goal can be the instruc
   embeddings of the clips where the caption fires in the ``zoo goals embed`` folder
   (``caption_goals``), which is what the prior stands in for at play time when it turns the
   caption's text into a goal; a segment that timed out keeps it too (it still shows the pursuit);
+- ``prior``: one of the prior's goals for the caption's text, drawn per segment from samples
+  made once (the datamodule's ``prior`` and ``cclip``): exactly what a user's typed
+  instruction gives at play time, where a clip centroid of this data set may lie elsewhere
+  (on goal-directed data the prior's "craft wood pickaxe" lies nearest "obtain sapling"'s
+  centroid);
 - ``completion``: the C-CLIP embedding of the clip at the action that completed the segment
   (its own outcome); segments that did not complete keep their hindsight goals.
 ``commanded`` uses them on every segment, ``mix`` on each segment with probability
@@ -34,8 +39,8 @@ from zoo.goals.relabel import Relabelling
 
 GoalSource = Literal["hindsight", "commanded", "mix"]
 GOAL_SOURCES: tuple[str, ...] = ("hindsight", "commanded", "mix")
-CommandedGoal = Literal["caption", "completion"]
-COMMANDED_GOALS: tuple[str, ...] = ("caption", "completion")
+CommandedGoal = Literal["caption", "prior", "completion"]
+COMMANDED_GOALS: tuple[str, ...] = ("caption", "prior", "completion")
 CAPTION_GOAL_STEP = -1
 """``goal_step`` of a step whose goal is a caption's embedding (no one clip is its goal)."""
 
@@ -48,7 +53,8 @@ class GoalSourceParams:
     commanded_weight: float = 0.5
     """``mix``: the share of instruction segments given their commanded goal."""
     commanded_goal: CommandedGoal = "caption"
-    """What a commanded goal is: the caption's embedding, or the completing clip's."""
+    """What a commanded goal is: the caption's embedding, a prior goal of its text, or the
+    completing clip's embedding."""
 
     def __post_init__(self) -> None:
         if self.source not in GOAL_SOURCES:
@@ -99,15 +105,17 @@ def episode_goals(
 ) -> dict[str, np.ndarray]:
     """One episode's per-step ``goal`` (zeros where unconditional), ``goal_mask`` and
     ``goal_step``, from its goal embeddings ``goals`` (T, D), its hindsight ``labels`` and its
-    instruction ``segments`` ([start, stop, caption_id, outcome], None: not goal-directed)."""
+    instruction ``segments`` ([start, stop, caption_id, outcome], None: not goal-directed).
+    ``prototypes`` maps a caption id to its goal (D,), or to goals (K, D) to draw one from."""
     goal_step = labels.goal_step.copy()
     goal = goals[goal_step]
     share = params.commanded_share
     for start, stop, caption_id, outcome in segments if share and segments else []:
         if rng.random() >= share:
             continue
-        if params.commanded_goal == "caption" and caption_id in prototypes:
-            goal[start:stop] = prototypes[caption_id]
+        if params.commanded_goal in ("caption", "prior") and caption_id in prototypes:
+            proto = prototypes[caption_id]
+            goal[start:stop] = proto[rng.integers(len(proto))] if proto.ndim == 2 else proto
             goal_step[start:stop] = CAPTION_GOAL_STEP
         elif params.commanded_goal == "completion" and outcome == COMPLETED:
             goal[start:stop] = goals[stop - 1]

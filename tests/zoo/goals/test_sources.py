@@ -102,3 +102,22 @@ def test_episodes_without_instructions_keep_hindsight_goals() -> None:
 def test_bad_goal_sources_are_refused(kwargs, message) -> None:
     with pytest.raises(ValueError, match=message):
         GoalSourceParams(**kwargs)
+
+
+def test_prior_goals_draw_one_of_the_captions_samples_per_segment() -> None:
+    """``prior``: prototypes hold K goals per caption; a segment gets one of them throughout."""
+    samples = {c: np.stack([np.full(D, 10 * c + k, np.float16) for k in range(5)])
+               for c in range(4)}
+    goals, labels, parts = _episode(40)
+    params = GoalSourceParams("commanded", 1.0, "prior")
+    out = episode_goals(goals, labels, parts, params, samples, np.random.default_rng(1))
+    drawn = set()
+    for start, stop, caption, _ in parts:
+        if caption not in samples:
+            np.testing.assert_array_equal(out["goal"][start:stop], goals[start:stop])
+            continue
+        row = out["goal"][start]
+        assert (out["goal"][start:stop] == row).all()
+        assert any((row == s).all() for s in samples[caption])
+        drawn.add((caption, float(row[0])))
+    assert len(drawn) > 8  # several samples of the same caption were drawn
