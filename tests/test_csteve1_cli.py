@@ -63,6 +63,17 @@ def test_fit_then_play_an_instruction(
     assert len(log["actions"]) == 12 and isinstance(log["unlocked"], dict)
     assert (out / "play.gif").stat().st_size > 0
 
+    both = tmp_path / "side_by_side"
+    argv[argv.index("--out") + 1] = str(both)
+    argv[3:5] = ["--instruction", "obtain wood", "--instruction", "obtain drink"]
+    assert main(argv) == 0
+    episodes = json.loads((both / "play.json").read_text())["episodes"]
+    assert [e["instruction"] for e in episodes] == ["obtain wood", "obtain drink"]
+    import imageio.v3 as iio
+
+    one, two = iio.imread(out / "play.gif"), iio.imread(both / "play.gif")
+    assert two.shape[2] == 2 * one.shape[2] + 4  # two tiles and the gap between them
+
     task_out = tmp_path / "task"
     argv = ["eval", "--task", "make_wood_pickaxe", "--checkpoint", str(checkpoint),
             "--instruction", "craft wood pickaxe", "--cclip", str(steve_cclip), "--prior",

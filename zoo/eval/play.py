@@ -1,8 +1,9 @@
-"""`zoo play`: watch an agent follow one instruction for one episode, as a GIF and a JSON log.
+"""`zoo play`: watch an agent follow an instruction for one episode, as a GIF and a JSON log.
 
 The GIF shows the instruction on every frame; the JSON lists which achievements were unlocked
 at which step, the actions taken and how the episode ended, so a person can check at a glance
-whether C-Steve-1 did what it was told.
+whether C-Steve-1 did what it was told. Given several instructions, each plays the same world
+(the same seed) and the GIF shows them side by side: what changes is what the instruction did.
 """
 
 from __future__ import annotations
@@ -30,6 +31,16 @@ def caption_frames(frames: np.ndarray, text: str, scale: int = 2) -> np.ndarray:
     ImageDraw.Draw(bar).text((3, 1), text, fill=(255, 255, 255))
     bar_pixels = np.asarray(bar, dtype=np.uint8)
     return np.concatenate([np.broadcast_to(bar_pixels, (t, *bar_pixels.shape)), frames], axis=1)
+
+
+def side_by_side(clips: list[np.ndarray], gap: int = 4) -> np.ndarray:
+    """Frames (T, H, W, 3) of several episodes as one (max T, H, n W + gaps, 3) movie; a
+    shorter episode holds its last frame."""
+    length = max(len(c) for c in clips)
+    padded = [np.concatenate([c, np.repeat(c[-1:], length - len(c), axis=0)]) for c in clips]
+    spacer = np.full((length, clips[0].shape[1], gap, 3), 255, np.uint8)
+    tiles = [part for clip in padded for part in (clip, spacer)][:-1]
+    return np.concatenate(tiles, axis=2)
 
 
 def play_episode(
@@ -85,14 +96,18 @@ def register(subparsers) -> None:
             "Play one episode with a C-Steve-1 checkpoint given --instruction (text read by "
             "C-CLIP's text tower and turned into a goal by the CVAE prior), or any agent zoo "
             "eval accepts. Writes OUT/play.gif (the instruction above the frames) and "
-            "OUT/play.json (achievements unlocked and their steps, actions, outcome)."
+            "OUT/play.json (achievements unlocked and their steps, actions, outcome). Several "
+            "--instruction play the same world one after another, side by side in the GIF "
+            "(OUT/play.json then lists one episode per instruction)."
         ),
     )
     p.add_argument(
         "--checkpoint", required=True, help="C-Steve-1 .ckpt (or a C-VPT one, no instruction)"
     )
     p.add_argument(
-        "--instruction", default=None, help='e.g. "obtain wood" (a caption or free text)'
+        "--instruction", action="append", default=None,
+        help='e.g. "obtain wood" (a caption or free text); repeat it to play each on the same '
+        "world, side by side in one GIF",
     )
     p.add_argument(
         "--cclip", default=None, help="C-CLIP .ckpt C-Steve-1 was trained with (text goals)"
@@ -120,13 +135,14 @@ def run_play(args: argparse.Namespace) -> int:
     from zoo.envs import make_env
     from zoo.eval.plots import write_gif
 
+    instructions = args.instruction or [None]
     try:  # a bad checkpoint is one line naming its file, not a traceback
         kind = checkpoint_kind(args.checkpoint)
-        if args.instruction is not None and kind != "csteve1":
+        if args.instruction and kind != "csteve1":
             raise ValueError(
                 f"--instruction needs a C-Steve-1 checkpoint; {args.checkpoint} is {kind}"
             )
-        if args.instruction is not None and (args.cclip is None or args.prior is None):
+        if args.instruction and (args.cclip is None or args.prior is None):
             raise ValueError(
                 "--instruction needs --cclip and --prior (text -> C-CLIP -> prior -> goal)"
             )
@@ -136,31 +152,39 @@ def run_play(args: argparse.Namespace) -> int:
         )
     except (ValueError, FileNotFoundError) as err:
         raise SystemExit(f"zoo play: error: {err}") from None
-    if args.instruction is not None:
+    if args.instruction:
         from zoo.agents.steve_agent import instruction_note
 
-        note = instruction_note(agent.goals, args.instruction)
-        if note:
-            print(f"zoo play: note: {note}", file=sys.stderr)
+        for instruction in instructions:
+            note = instruction_note(agent.goals, instruction)
+            if note:
+                print(f"zoo play: note: {note}", file=sys.stderr)
     env = make_env(args.env, 1, pixels=True, max_steps=args.max_steps)
-    result = play_episode(agent, env, args.seed, args.instruction, args.max_steps, progress=True)
     args.out.mkdir(parents=True, exist_ok=True)
-    label = args.instruction or "(no instruction)"
-    write_gif(caption_frames(result["frames"], label), args.out / "play.gif", scale=1)
-    log = {
-        "instruction": args.instruction,
-        "checkpoint": str(args.checkpoint),
-        "env": args.env,
-        "seed": args.seed,
-        **inference_meta(agent, args.temperature),
-        "steps": len(result["actions"]),
-        "survived": result["survived"],
-        "unlocked": result["unlocked"],
-        "actions": [ACTION_NAMES[a] for a in result["actions"]],
-    }
+    clips, logs = [], []
+    for instruction in instructions:
+        result = play_episode(agent, env, args.seed, instruction, args.max_steps, progress=True)
+        label = instruction or "(no instruction)"
+        clips.append(caption_frames(result["frames"], label))
+        logs.append({
+            "instruction": instruction,
+            "checkpoint": str(args.checkpoint),
+            "env": args.env,
+            "seed": args.seed,
+            **inference_meta(agent, args.temperature),
+            "steps": len(result["actions"]),
+            "survived": result["survived"],
+            "unlocked": result["unlocked"],
+            "actions": [ACTION_NAMES[a] for a in result["actions"]],
+        })
+        print(f"{label}: {len(result['actions'])} steps, unlocked {result['unlocked']}")
+    write_gif(side_by_side(clips) if len(clips) > 1 else clips[0], args.out / "play.gif", scale=1)
+    log = logs[0] if len(logs) == 1 else {"episodes": logs}
     (args.out / "play.json").write_text(json.dumps(log, indent=2) + "\n")
-    print(f"{label}: {len(result['actions'])} steps, unlocked {result['unlocked']} -> {args.out}")
+    print(f"wrote {args.out / 'play.gif'} and {args.out / 'play.json'}")
     return 0
 
 
-__all__ = ["caption_frames", "inference_meta", "play_episode", "register", "run_play"]
+__all__ = [
+    "caption_frames", "inference_meta", "play_episode", "register", "run_play", "side_by_side",
+]

@@ -127,3 +127,16 @@ def test_every_report_key_is_documented(tmp_path):
     }
     report = write_report(make_results(), tmp_path, meta)
     assert set(report) - documented == set()
+
+
+def test_side_by_side_holds_the_shorter_episodes_last_frame() -> None:
+    import numpy as np
+
+    from zoo.eval.play import side_by_side
+
+    a = np.zeros((3, 2, 2, 3), np.uint8)
+    b = np.stack([np.full((2, 2, 3), v, np.uint8) for v in (10, 20)])
+    movie = side_by_side([a, b], gap=1)
+    assert movie.shape == (3, 2, 5, 3)
+    assert (movie[:, :, 2] == 255).all()  # the gap
+    assert (movie[2, :, 3:] == 20).all() and (movie[0, :, 3:] == 10).all()
