@@ -23,10 +23,11 @@ The filter therefore drops sleeping steps too unless ``drop_sleeping=False``.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from zoo.envs.constants import DIRECTION_OFFSETS, Action, Block, Mob
-from zoo.envs.schema import MAP_SIZE, State
+from zoo.envs.schema import MAP_SIZE, STATE_FIELDS, State
 
 _MOVES = np.array(sorted(DIRECTION_OFFSETS), np.int64)
 # direction id (1..4) -> (d_row, d_col); row 0 pads the unused id 0
@@ -34,6 +35,52 @@ _OFFSETS = np.zeros((5, 2), np.int64)
 for _dir, _off in DIRECTION_OFFSETS.items():
     _OFFSETS[_dir] = _off
 _HITTABLE = np.array([Mob.COW, Mob.ZOMBIE, Mob.SKELETON], np.uint8)
+_IS_HITTABLE = np.isin(np.arange(256), _HITTABLE)  # uint8 mob id -> hittable
+_FIRST_MOVE, _LAST_MOVE = int(_MOVES[0]), int(_MOVES[-1])
+assert np.array_equal(_MOVES, np.arange(_FIRST_MOVE, _LAST_MOVE + 1)), "moves: one id range"
+_NOOP, _DO, _SLEEP, _PLACE_STONE = (int(a) for a in (Action.NOOP, Action.DO, Action.SLEEP,
+                                                     Action.PLACE_STONE))
+_GRASS = int(Block.GRASS)
+_FLAG_FIELDS = ("inventory", "achievements", "player_pos", "player_dir", "player_vitals", "map",
+                "mob_map", "player_sleeping")
+
+
+@numba.njit(cache=True)
+def _all_equal(a, b, i):
+    for j in range(a.shape[1]):
+        if a[i, j] != b[i, j]:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _flags(actions, inventory, achievements, pos, direction, vitals, map_, mob_map, sleeping,
+           inventory2, achievements2, pos2, direction2, vitals2, map2, sleeping2, offsets,
+           hittable, out):
+    """The rule of ``noop_flags``, env by env: the action kinds are disjoint, so of the rule's
+    terms only the action's own can hold (a sleeping player's steps are all noops)."""
+    for i in range(actions.shape[0]):
+        if direction[i] >= offsets.shape[0]:
+            raise IndexError("player_dir out of range")
+        a = actions[i]
+        if a < 0:
+            out[i] = False
+        elif sleeping[i] or a == _NOOP:
+            out[i] = True
+        elif _FIRST_MOVE <= a <= _LAST_MOVE:
+            out[i] = _all_equal(pos, pos2, i) and direction[i] == direction2[i]
+        elif a == _DO:
+            row = min(max(np.int64(pos[i, 0]) + offsets[direction[i], 0], 0), MAP_SIZE - 1)
+            col = min(max(np.int64(pos[i, 1]) + offsets[direction[i], 1], 0), MAP_SIZE - 1)
+            block = map_[i, row, col]
+            fed = vitals2[i, 1] > vitals[i, 1] or vitals2[i, 2] > vitals[i, 2]
+            out[i] = (block == map2[i, row, col] and not hittable[mob_map[i, row, col]]
+                      and block != _GRASS and _all_equal(inventory, inventory2, i)
+                      and _all_equal(achievements, achievements2, i) and not fed)
+        elif a == _SLEEP:
+            out[i] = not sleeping2[i]
+        else:
+            out[i] = a >= _PLACE_STONE and _all_equal(inventory, inventory2, i)
 
 
 def noop_flags(actions: np.ndarray, before: State, after: State) -> np.ndarray:
@@ -45,28 +92,13 @@ def noop_flags(actions: np.ndarray, before: State, after: State) -> np.ndarray:
         after: state that followed it.
     """
     actions = np.asarray(actions, np.int64)
-    idx = np.arange(len(actions))
-    inv_same = (before["inventory"] == after["inventory"]).all(-1)
-    ach_same = (before["achievements"] == after["achievements"]).all(-1)
-    pos_same = (before["player_pos"] == after["player_pos"]).all(-1)
-    dir_same = before["player_dir"] == after["player_dir"]
-    fed = (after["player_vitals"][:, 1:3] > before["player_vitals"][:, 1:3]).any(-1)
-
-    facing = before["player_pos"].astype(np.int64) + _OFFSETS[before["player_dir"].astype(np.int64)]
-    row, col = np.clip(facing[:, 0], 0, MAP_SIZE - 1), np.clip(facing[:, 1], 0, MAP_SIZE - 1)
-    facing_block = before["map"][idx, row, col]
-    block_same = facing_block == after["map"][idx, row, col]
-    mob_there = np.isin(before["mob_map"][idx, row, col], _HITTABLE)
-    sapling_try = facing_block == Block.GRASS
-    do_noop = block_same & ~mob_there & ~sapling_try & inv_same & ach_same & ~fed
-
-    noop = actions == Action.NOOP
-    noop |= np.isin(actions, _MOVES) & pos_same & dir_same
-    noop |= (actions == Action.DO) & do_noop
-    noop |= (actions == Action.SLEEP) & ~after["player_sleeping"]
-    noop |= (actions >= Action.PLACE_STONE) & inv_same
-    noop |= before["player_sleeping"].astype(bool)
-    return noop & (actions >= 0)
+    # one numba pass: the ~25 numpy ops it replaced took ~1/10 of a generation step's overhead
+    states = [np.asarray(state[k], STATE_FIELDS[k].dtype) for state in (before, after)
+              for k in _FLAG_FIELDS]
+    del states[-2]  # the mob map after the step is not read
+    out = np.empty(len(actions), bool)
+    _flags(actions, *states, _OFFSETS, _IS_HITTABLE, out)
+    return out
 
 
 def noop_runs(noop: np.ndarray) -> np.ndarray:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,10 +20,17 @@ from zoo.data.codec import FrameCodec
 from zoo.data.manifest import package_versions
 from zoo.data.noop import noop_counts, noop_flags, noop_runs
 from zoo.data.rerender import renderer_version
-from zoo.data.shards import SHARD_PATTERN, ChunkEncoder, EpisodeRecorder, assemble_shard
+from zoo.data.shards import (
+    SHARD_PATTERN,
+    STATE_ROW_BYTES,
+    BufferPool,
+    ChunkEncoder,
+    EpisodeRecorder,
+    assemble_shard,
+    state_views,
+)
 from zoo.envs.base import Step, episode_seed
 from zoo.envs.constants import ACHIEVEMENT_NAMES
-from zoo.envs.schema import index_state
 from zoo.envs.tasks.starts import START_STATES, TaskStartEnv
 from zoo.experts.scripted.schedule import (
     InstructionSchedule,
@@ -189,6 +196,9 @@ class ShardGenerator:
             self.scheduler = InstructionScheduler(config.instructions, self.agent)
         self.versions = package_versions()
         self.renderer = renderer_version() if config.frames == "rendered" else None
+        self.buffers = BufferPool()  # recorders' buffers, reused from shard to shard
+        self._rows = np.empty((self.num_envs, STATE_ROW_BYTES), np.uint8)
+        self._row_fields = state_views(self._rows)  # a step's states, packed once for all envs
 
     def run(self, index: int, out: Path, progress: ProgressFn | None = None) -> dict:
         """Play shard ``index``'s episodes, write the shard, return its manifest entry."""
@@ -208,7 +218,7 @@ class ShardGenerator:
         recorders: list[EpisodeRecorder | None] = [None] * self.num_envs
         seeds = np.zeros(self.num_envs, np.int64)
 
-        with ChunkEncoder(max_pending=self.num_envs + 1) as encoder:
+        with ChunkEncoder(max_pending=self.num_envs + 1, pool=self.buffers) as encoder:
 
             def start(slot: int) -> bool:
                 episode = next(episodes, None)
@@ -243,14 +253,19 @@ class ShardGenerator:
                     drove += self.agent.expert_drove
                 restart = np.zeros(self.num_envs, bool)
                 rngs = self._state_rngs(after)
-                for slot, rec in enumerate(recorders):
+                rows = self._pack(after.state)
+                # python scalars once per step: indexing numpy arrays env by env costs more
+                rewards, dones = np.asarray(after.reward).tolist(), np.asarray(after.done).tolist()
+                per_env = zip(labels.tolist(), rewards, noop.tolist(), commanded.tolist(), strict=True)
+                for slot, (rec, (label, reward, flag, instruction)) in enumerate(
+                    zip(recorders, per_env, strict=True)
+                ):
                     if rec is None:
                         continue
-                    rec.act(int(labels[slot]), float(after.reward[slot]), bool(noop[slot]),
-                            int(commanded[slot]))
-                    rec.observe(_frame(after, slot), index_state(after.state, slot), rngs[slot])
+                    rec.act(label, reward, flag, instruction)
+                    rec.observe(_frame(after, slot), None, rngs[slot], rows[slot])
                     frames += 1
-                    if after.done[slot]:
+                    if dones[slot]:
                         summaries[rec.episode] = self._summary(rec, slot)
                         if cfg.dagger is not None:
                             summaries[rec.episode]["dagger"] = (int(agreed[slot]), int(drove[slot]))
@@ -270,13 +285,20 @@ class ShardGenerator:
                 if progress and frames >= 1024:
                     progress(0, frames)
                     frames = 0
-            for summary in summaries.values():
-                summary.pop("written").result()  # raises if writing a fragment failed
-        if progress and frames:
-            progress(0, frames)
-        order = sorted(summaries)
-        path = Path(out) / SHARD_PATTERN.format(index=index)
-        sha = assemble_shard([workdir / f"e{e:07d}.tar" for e in order], path)
+            if progress and frames:
+                progress(0, frames)
+            order = sorted(summaries)
+            written = {e: summaries[e].pop("written") for e in order}
+
+            def fragments() -> Iterator[Path]:
+                # each episode's fragment is copied into the shard as soon as it is written,
+                # while the encoder still codes the last chunks of the next ones
+                for e in order:
+                    written[e].result()  # raises if writing the fragment failed
+                    yield workdir / f"e{e:07d}.tar"
+
+            path = Path(out) / SHARD_PATTERN.format(index=index)
+            sha = assemble_shard(fragments(), path)
         shutil.rmtree(workdir, ignore_errors=True)
         return self._entry(index, path, sha, [summaries[e] for e in order])
 
@@ -306,13 +328,18 @@ class ShardGenerator:
             return [None] * self.num_envs
         return np.asarray(step.raw.state_rng)
 
+    def _pack(self, state: dict) -> np.ndarray:
+        """The envs' states packed in rows (``zoo.data.shards.state_views``); reused buffer."""
+        for k, column in self._row_fields.items():
+            column[...] = state[k]
+        return self._rows
+
     def _observe(self, step: Step, recorders: list, mask: np.ndarray) -> None:
         rngs = self._state_rngs(step)
+        rows = self._pack(step.state)
         for slot in np.flatnonzero(mask):
             if recorders[slot] is not None:
-                recorders[slot].observe(
-                    _frame(step, slot), index_state(step.state, slot), rngs[slot]
-                )
+                recorders[slot].observe(_frame(step, slot), None, rngs[slot], rows[slot])
 
     def _summary(self, rec: EpisodeRecorder, slot: int) -> dict:
         """Finish the episode and keep what the manifest reports about it."""

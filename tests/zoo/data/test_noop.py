@@ -167,3 +167,61 @@ def test_filter_drops_sleeping_steps_unless_asked_to_keep_them():
     assert len(kept["step_index"]) == len(noop)
     counts = noop_counts(noop, noop_runs(noop), np.zeros(len(noop)), 20, chunk["state"]["player_sleeping"])
     assert counts["kept_steps"] == 5 and counts["kept_noop_steps"] == 0
+
+
+def _numpy_noop_flags(actions, before, after):
+    """The rule as numpy wrote it before ``noop_flags`` became one numba pass (reference)."""
+    from zoo.data.noop import _OFFSETS
+    from zoo.envs.schema import MAP_SIZE
+
+    actions = np.asarray(actions, np.int64)
+    idx = np.arange(len(actions))
+    inv_same = (before["inventory"] == after["inventory"]).all(-1)
+    ach_same = (before["achievements"] == after["achievements"]).all(-1)
+    pos_same = (before["player_pos"] == after["player_pos"]).all(-1)
+    dir_same = before["player_dir"] == after["player_dir"]
+    fed = (after["player_vitals"][:, 1:3] > before["player_vitals"][:, 1:3]).any(-1)
+    facing = before["player_pos"].astype(np.int64) + _OFFSETS[before["player_dir"].astype(np.int64)]
+    row, col = np.clip(facing[:, 0], 0, MAP_SIZE - 1), np.clip(facing[:, 1], 0, MAP_SIZE - 1)
+    facing_block = before["map"][idx, row, col]
+    block_same = facing_block == after["map"][idx, row, col]
+    mob_there = np.isin(before["mob_map"][idx, row, col], [Mob.COW, Mob.ZOMBIE, Mob.SKELETON])
+    do_noop = (block_same & ~mob_there & (facing_block != Block.GRASS) & inv_same & ach_same
+               & ~fed)
+    moves = [Action.MOVE_LEFT, Action.MOVE_RIGHT, Action.MOVE_UP, Action.MOVE_DOWN]
+    noop = actions == Action.NOOP
+    noop |= np.isin(actions, moves) & pos_same & dir_same
+    noop |= (actions == Action.DO) & do_noop
+    noop |= (actions == Action.SLEEP) & ~after["player_sleeping"]
+    noop |= (actions >= Action.PLACE_STONE) & inv_same
+    noop |= before["player_sleeping"].astype(bool)
+    return noop & (actions >= 0)
+
+
+def test_noop_flags_equal_the_numpy_rule_on_random_transitions():
+    rng = np.random.default_rng(0)
+    n = 3000
+    before = empty_state(n)
+    before["player_pos"] = rng.integers(-1, 66, (n, 2)).astype(np.int16)  # edges clamp
+    before["player_dir"] = rng.integers(0, 5, n).astype(np.uint8)
+    before["map"] = rng.integers(0, 4, (n, 64, 64)).astype(np.uint8)  # grass 2 among them
+    before["mob_map"] = rng.integers(0, 5, (n, 64, 64)).astype(np.uint8)
+    before["inventory"] = rng.integers(0, 2, (n, 12)).astype(np.int16)
+    before["achievements"] = rng.random((n, 22)) < 0.5
+    before["player_vitals"] = rng.integers(0, 3, (n, 4)).astype(np.int8)
+    before["player_sleeping"] = rng.random(n) < 0.2
+    after = {k: v.copy() for k, v in before.items()}
+    for name in ("player_pos", "inventory", "achievements", "player_vitals", "player_sleeping",
+                 "map"):
+        changed = rng.random(n) < 0.15  # each field changes alone in some steps
+        if after[name].dtype == bool:
+            after[name][changed] = ~after[name][changed]
+        else:
+            after[name][changed] += rng.integers(-1, 2, after[name][changed].shape).astype(
+                after[name].dtype)
+    after["player_dir"] = np.where(rng.random(n) < 0.15, rng.integers(0, 5, n),
+                                   before["player_dir"]).astype(np.uint8)
+    actions = rng.integers(-1, 18, n)
+    flags = noop_flags(actions, before, after)
+    np.testing.assert_array_equal(flags, _numpy_noop_flags(actions, before, after))
+    assert 0.2 < flags.mean() < 0.95  # both outcomes, many times
