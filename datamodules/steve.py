@@ -27,7 +27,13 @@ from zoo.data.sequences import ShardSources
 from zoo.goals.attach import GOAL_KEYS, GoalAttacher, SequenceGoalDrop
 from zoo.goals.embed import GOAL_DTYPE, check_embeddings_match, load_embedding_manifest
 from zoo.goals.relabel import RelabelMode, RelabelParams, UncondPer
-from zoo.goals.sources import CommandedGoal, GoalSource, GoalSourceParams, caption_goals
+from zoo.goals.sources import (
+    CommandedGoal,
+    CommandedSegments,
+    GoalSource,
+    GoalSourceParams,
+    caption_goals,
+)
 
 
 class SteveDataModule(CrafterPlayDataModule):
@@ -47,6 +53,7 @@ class SteveDataModule(CrafterPlayDataModule):
         goal_source: GoalSource = "hindsight",
         commanded_weight: float = 0.5,
         commanded_goal: CommandedGoal = "caption",
+        commanded_segments: CommandedSegments = "all",
         cclip: str | None = None,
         prior: str | None = None,
         prior_samples: int = 32,
@@ -88,6 +95,8 @@ class SteveDataModule(CrafterPlayDataModule):
             completed the instruction; segments that did not complete keep hindsight goals), or
             ``prior``: one of ``prior_samples`` goals the ``prior`` gives the caption's text
             (through ``cclip``'s text tower), drawn per segment: what a typed instruction gives.
+        commanded_segments: ``all`` instruction segments get commanded goals, or only those
+            whose instruction was ``completed`` (the others keep hindsight goals).
         cclip: C-CLIP checkpoint or export of ``commanded_goal: prior`` (its text tower; the
             one that embedded ``embeddings``).
         prior: CVAE prior checkpoint or export of ``commanded_goal: prior``.
@@ -126,7 +135,9 @@ class SteveDataModule(CrafterPlayDataModule):
         )
         self.save_hyperparameters()  # after the parent's: this subclass's arguments win
         self.relabel_params = RelabelParams(relabel, min_gap, max_gap, uncond_prob, uncond_per)
-        self.goal_sources = GoalSourceParams(goal_source, commanded_weight, commanded_goal)
+        self.goal_sources = GoalSourceParams(
+            goal_source, commanded_weight, commanded_goal, commanded_segments
+        )
         self._embeddings_checked = False
         self._caption_goals: dict | None = None
 

@@ -17,7 +17,10 @@ caption, in whatever context the schedule put it, so the goal can be the instruc
   centroid);
 - ``completion``: the C-CLIP embedding of the clip at the action that completed the segment
   (its own outcome); segments that did not complete keep their hindsight goals.
-``commanded`` uses them on every segment, ``mix`` on each segment with probability
+``commanded`` uses them on every segment (``commanded_segments: completed``: only on segments
+whose instruction was completed; the others keep hindsight goals, e.g. the expert's pursuits of
+"obtain ripe plant", which a 500-step episode never completes and whose prior goal lies at
+cosine 0.96 from "obtain drink"'s), ``mix`` on each segment with probability
 ``commanded_weight`` (one draw per segment, from (seed, epoch, episode)). Steps without an
 instruction (the expert's rests) and captions that never fire in the embeddings keep their
 hindsight goals. Which
@@ -41,6 +44,8 @@ GoalSource = Literal["hindsight", "commanded", "mix"]
 GOAL_SOURCES: tuple[str, ...] = ("hindsight", "commanded", "mix")
 CommandedGoal = Literal["caption", "prior", "completion"]
 COMMANDED_GOALS: tuple[str, ...] = ("caption", "prior", "completion")
+CommandedSegments = Literal["all", "completed"]
+COMMANDED_SEGMENTS: tuple[str, ...] = ("all", "completed")
 CAPTION_GOAL_STEP = -1
 """``goal_step`` of a step whose goal is a caption's embedding (no one clip is its goal)."""
 
@@ -55,6 +60,8 @@ class GoalSourceParams:
     commanded_goal: CommandedGoal = "caption"
     """What a commanded goal is: the caption's embedding, a prior goal of its text, or the
     completing clip's embedding."""
+    commanded_segments: CommandedSegments = "all"
+    """Which segments get commanded goals: all, or only those whose instruction completed."""
 
     def __post_init__(self) -> None:
         if self.source not in GOAL_SOURCES:
@@ -62,6 +69,11 @@ class GoalSourceParams:
         if self.commanded_goal not in COMMANDED_GOALS:
             raise ValueError(
                 f"commanded_goal={self.commanded_goal!r}: expected one of {COMMANDED_GOALS}"
+            )
+        if self.commanded_segments not in COMMANDED_SEGMENTS:
+            raise ValueError(
+                f"commanded_segments={self.commanded_segments!r}: expected one of "
+                f"{COMMANDED_SEGMENTS}"
             )
         if not 0.0 <= self.commanded_weight <= 1.0:
             raise ValueError(f"commanded_weight={self.commanded_weight} must lie in [0, 1]")
@@ -113,6 +125,8 @@ def episode_goals(
     for start, stop, caption_id, outcome in segments if share and segments else []:
         if rng.random() >= share:
             continue
+        if params.commanded_segments == "completed" and outcome != COMPLETED:
+            continue
         if params.commanded_goal in ("caption", "prior") and caption_id in prototypes:
             proto = prototypes[caption_id]
             goal[start:stop] = proto[rng.integers(len(proto))] if proto.ndim == 2 else proto
@@ -127,8 +141,10 @@ def episode_goals(
 __all__ = [
     "CAPTION_GOAL_STEP",
     "COMMANDED_GOALS",
+    "COMMANDED_SEGMENTS",
     "GOAL_SOURCES",
     "CommandedGoal",
+    "CommandedSegments",
     "GoalSource",
     "GoalSourceParams",
     "caption_goals",

@@ -121,3 +121,16 @@ def test_prior_goals_draw_one_of_the_captions_samples_per_segment() -> None:
         assert any((row == s).all() for s in samples[caption])
         drawn.add((caption, float(row[0])))
     assert len(drawn) > 8  # several samples of the same caption were drawn
+
+
+def test_completed_segments_only_leave_the_others_their_hindsight_goals() -> None:
+    goals, labels, parts = _episode(20)
+    params = GoalSourceParams("commanded", 1.0, "caption", "completed")
+    out = episode_goals(goals, labels, parts, params, PROTOTYPES, np.random.default_rng(1))
+    for start, stop, caption, outcome in parts:
+        if outcome == "completed" and caption in PROTOTYPES:
+            assert (out["goal"][start:stop] == PROTOTYPES[caption]).all()
+        else:
+            np.testing.assert_array_equal(out["goal"][start:stop], goals[start:stop])
+    with pytest.raises(ValueError, match="commanded_segments='some'"):
+        GoalSourceParams("commanded", 1.0, "caption", "some")
