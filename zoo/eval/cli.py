@@ -423,6 +423,7 @@ def _register_instruction_matrix(protocols) -> None:
     p.add_argument("--cfg-scale", type=float, help="C-Steve-1's guidance (default: its own)")
     _add_episode_args(p)
     p.add_argument("--max-steps", type=positive_int, default=200, help="L: steps per episode (200)")
+    p.add_argument("--horizons", type=positive_int, nargs="+", default=[], help=matrix.HORIZONS)
     p.add_argument("--instructions", nargs="+", help="some of the default instructions only")
     p.add_argument("--out", type=out_dir, required=True, help="folder of the rows and report")
     p.set_defaults(handler=run_instruction_matrix)
@@ -431,7 +432,6 @@ def _register_instruction_matrix(protocols) -> None:
 def run_instruction_matrix(args: argparse.Namespace) -> int:
     """``zoo eval instructions``: play or read every row, then write the report."""
     from zoo.eval import instruction_matrix as matrix
-
     num_envs = min(args.num_envs, args.episodes)
     paths = [None if p is None else str(p) for p in (args.checkpoint, args.cclip, args.prior)]
     setting = matrix.Setting(args.agent, *paths, args.cfg_scale, args.temperature, args.seed,
@@ -440,10 +440,11 @@ def run_instruction_matrix(args: argparse.Namespace) -> int:
         columns = matrix.pick_columns(args.instructions)
         agent, setting = matrix.make_instructable(setting, num_envs, columns)
         matrix.check_saved(args.out, args.env, columns, setting)
+        horizons = matrix.check_horizons(args.horizons, args.max_steps)
     except ValueError as err:
         print(f"zoo eval instructions: error: {err}", file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
-    report = matrix.run(agent, setting, args.env, columns, args.out, num_envs)
+    report = matrix.run(agent, setting, args.env, columns, args.out, num_envs, horizons)
     print(f"wrote {', '.join(str(args.out / name) for name in report['files'])}")
     return 0

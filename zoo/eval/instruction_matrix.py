@@ -59,6 +59,7 @@ DESCRIPTION = (
     "worse than it) and OUT/matrix.png; each row is saved as OUT/<game>/<row>.json, and a rerun "
     "reads the saved rows instead of playing them."
 )
+HORIZONS = "also score the same episodes within their first H steps, for each H < --max-steps"
 
 
 @dataclass(frozen=True)
@@ -146,6 +147,30 @@ def verdict_line(game: str, s: dict[str, int]) -> str:
         f"{s['below_none']}, separated (worse told than untold) in {s['worse_than_none']}; "
         f"separated above the best other instruction in {s['separated_from_best_other']}"
     )
+
+
+def check_horizons(horizons: Sequence[int], max_steps: int) -> tuple[int, ...]:
+    """The extra horizons, sorted and without L itself; ValueError if one is longer than L
+    (the rows stop there)."""
+    longer = [h for h in horizons if not 1 <= h <= max_steps]
+    if longer:
+        raise ValueError(f"--horizons {longer[0]}: the rows play {max_steps} steps "
+                         f"(--max-steps); give horizons from 1 to {max_steps}")
+    return tuple(sorted(set(horizons) - {max_steps}))
+
+
+def score(rows: dict[str, list[dict[str, int]]], columns: Sequence[SubTask], episodes: int,
+          horizon: int, game: str) -> dict:
+    """One game's counts, per-column verdict, summary and Wilson cells within ``horizon``."""
+    counts = count_matrix(rows, columns, horizon)
+    per_column = verdict(counts, episodes, columns)
+    summary = summarize(per_column)
+    return {
+        "counts": counts, "columns": per_column, "verdict": summary,
+        "verdict_line": verdict_line(game, summary),
+        "wilson95_percent": {r: {a: interval(k, episodes) for a, k in c.items()}
+                             for r, c in counts.items()},
+    }
 
 
 class _Told:
@@ -257,10 +282,12 @@ def play_game(
 
 def run(
     agent: InstructableAgent, setting: Setting, games: Sequence[str],
-    columns: Sequence[SubTask], out: Path, num_envs: int,
+    columns: Sequence[SubTask], out: Path, num_envs: int, horizons: Sequence[int] = (),
 ) -> dict:
     """Play (or read) every row in every game and write OUT/report.json, report.md and
-    matrix.png; returns the report."""
+    matrix.png; returns the report. Each of ``horizons`` (shorter than L, ``check_horizons``)
+    scores the same episodes again, within its first steps: an agent's play does not depend
+    on L, so this is the matrix a shorter --max-steps would give, without playing it."""
     report: dict = {
         "setting": asdict(setting), "columns": [
             {"instruction": c.instruction, "achievement": ACHIEVEMENT_NAMES[c.achievement]}
@@ -269,16 +296,15 @@ def run(
     }
     for game in games:
         rows, seconds = play_game(agent, game, columns, setting, out, num_envs)
-        counts = count_matrix(rows, columns, setting.max_steps)
-        per_column = verdict(counts, setting.episodes, columns)
-        summary = summarize(per_column)
         report["games"][game] = {
-            "counts": counts, "columns": per_column, "verdict": summary,
-            "verdict_line": verdict_line(game, summary), "seconds_played": seconds,
-            "wilson95_percent": {r: {a: interval(k, setting.episodes) for a, k in c.items()}
-                                 for r, c in counts.items()},
+            **score(rows, columns, setting.episodes, setting.max_steps, game),
+            "seconds_played": seconds,
+            "horizons": {str(h): score(rows, columns, setting.episodes, h, game)
+                         for h in horizons},
         }
-        print(report["games"][game]["verdict_line"], flush=True)
+        for h, g in [(setting.max_steps, report["games"][game]),
+                     *((int(h), g) for h, g in report["games"][game]["horizons"].items())]:
+            print(f"within {h} steps: {g['verdict_line']}", flush=True)
     report["written_at"] = datetime.now(UTC).isoformat(timespec="seconds")
     report["files"] = ["report.json", "report.md", "matrix.png"]
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -304,19 +330,26 @@ def format_markdown(report: dict) -> str:
     ]
     names = [c["achievement"] for c in report["columns"]]
     for game, g in report["games"].items():
-        marks = {(c["instruction"], c["achievement"]): "**" for c in g["columns"]}
-        marks.update({(r, c["achievement"]): "_" for c in g["columns"] for r in _marked(c)})
-        lines += ["", f"## {game}", "", "| instruction | " + " | ".join(names) + " |",
-                  "|---|" + "---:|" * len(names)]
-        for row, cells in g["counts"].items():
-            texts = []
-            for a in names:
-                low, high = g["wilson95_percent"][row][a]
-                mark = marks.get((row, a), "")
-                texts.append(f"{mark}{cells[a]}/{s['episodes']} ({low:.0f}–{high:.0f}){mark}")
-            lines.append(f"| {row} | " + " | ".join(texts) + " |")
-        lines += ["", g["verdict_line"]]
+        lines += ["", f"## {game}", "", *_table(g, names, s["episodes"]), "", g["verdict_line"]]
+        for h, within in g.get("horizons", {}).items():
+            lines += ["", f"### {game}, the same episodes within {h} steps", "",
+                      *_table(within, names, s["episodes"]), "", within["verdict_line"]]
     return "\n".join(lines) + "\n"
+
+
+def _table(g: dict, names: list[str], episodes: int) -> list[str]:
+    """One scored matrix (``score``) as markdown table lines."""
+    marks = {(c["instruction"], c["achievement"]): "**" for c in g["columns"]}
+    marks.update({(r, c["achievement"]): "_" for c in g["columns"] for r in _marked(c)})
+    lines = ["| instruction | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
+    for row, cells in g["counts"].items():
+        texts = []
+        for a in names:
+            low, high = g["wilson95_percent"][row][a]
+            mark = marks.get((row, a), "")
+            texts.append(f"{mark}{cells[a]}/{episodes} ({low:.0f}–{high:.0f}){mark}")
+        lines.append(f"| {row} | " + " | ".join(texts) + " |")
+    return lines
 
 
 def _marked(column: dict) -> list[str]:

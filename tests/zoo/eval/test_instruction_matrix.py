@@ -77,6 +77,31 @@ def test_a_cell_counts_first_unlocks_within_the_horizon() -> None:
         "obtain sapling": {"collect_sapling": 1}, NO_INSTRUCTION: {"collect_sapling": 1}}
 
 
+def test_a_shorter_horizon_scores_the_same_episodes_as_a_shorter_run() -> None:
+    # first unlock steps of 3 episodes per row: scored within 10 steps, each row keeps only
+    # the unlocks a 10-step run would have seen (an agent's play does not depend on L)
+    rows = {
+        "obtain sapling": [{"collect_sapling": 4}, {"collect_sapling": 12}, {}],
+        "obtain drink": [{"collect_drink": 30, "collect_sapling": 9}, {}, {}],
+        "place table on grass": [{"place_table": 10}, {"place_table": 11}, {}],
+        NO_INSTRUCTION: [{"collect_sapling": 15, "place_table": 2}, {}, {}],
+    }
+    columns = (SAPLING, DRINK, TABLE)
+    long, short = (matrix.score(rows, columns, 3, h, "crafter") for h in (40, 10))
+    assert long["counts"]["obtain sapling"]["collect_sapling"] == 2
+    assert short["counts"]["obtain sapling"]["collect_sapling"] == 1
+    assert short["counts"][NO_INSTRUCTION] == {"collect_sapling": 0, "collect_drink": 0,
+                                               "place_table": 1}
+    assert long["counts"]["obtain drink"]["collect_drink"] == 1
+    assert short["counts"]["obtain drink"]["collect_drink"] == 0
+    # within 40 steps every own instruction leads its column; within 10 all three only tie
+    assert long["verdict"]["own_is_max"] == short["verdict"]["own_is_max"] == 3
+    assert (long["verdict"]["own_is_max_tied"], short["verdict"]["own_is_max_tied"]) == (0, 3)
+    assert matrix.check_horizons([10, 40, 10], 40) == (10,)
+    with pytest.raises(ValueError, match="--horizons 50: the rows play 40 steps"):
+        matrix.check_horizons([10, 50], 40)
+
+
 def test_the_default_rows_are_the_task_suites_captions() -> None:
     assert [c.instruction for c in COLUMNS] == [
         "obtain sapling", "obtain drink", "place table on grass", "obtain wood",
@@ -104,7 +129,7 @@ def test_the_scripted_expert_plays_the_matrix_then_a_rerun_reads_it(
     out = tmp_path / "matrix"
     argv = ["eval", "instructions", "--agent", "scripted", "--env", "crafter", "--episodes", "2",
             "--num-envs", "2", "--max-steps", "40", "--instructions", "obtain sapling",
-            "--out", str(out)]
+            "--horizons", "20", "--out", str(out)]
     assert main(argv) == 0
     report = json.loads((out / "report.json").read_text())
     assert report["rows"] == ["obtain sapling", NO_INSTRUCTION]
@@ -116,6 +141,13 @@ def test_the_scripted_expert_plays_the_matrix_then_a_rerun_reads_it(
         row = json.loads((out / "crafter" / f"{name}.json").read_text())
         assert [e["seed"] for e in row["episodes"]] == [episode_seed(0, j) for j in range(2)]
     assert game["verdict_line"] in (out / "report.md").read_text()
+    within = game["horizons"]["20"]  # the same saved rows, scored within 20 steps
+    rows = {name: [json.loads((out / "crafter" / f"{name}.json").read_text())]
+            for name in ("obtain_sapling", "no_instruction")}
+    for label, name in (("obtain sapling", "obtain_sapling"), (NO_INSTRUCTION, "no_instruction")):
+        steps = [e["unlock_step"].get("collect_sapling", 0) for e in rows[name][0]["episodes"]]
+        assert within["counts"][label]["collect_sapling"] == sum(1 <= s <= 20 for s in steps)
+    assert "### crafter, the same episodes within 20 steps" in (out / "report.md").read_text()
     assert (out / "matrix.png").read_bytes().startswith(b"\x89PNG")
 
     def no_play(*args, **kwargs):
@@ -143,6 +175,8 @@ def test_the_scripted_expert_plays_the_matrix_then_a_rerun_reads_it(
         ([], "give --agent NAME or --checkpoint PATH"),
         (["--checkpoint", "weights/csteve1_cpu"], "give --cclip and --prior"),
         (["--checkpoint", "nope"], "--checkpoint nope does not exist"),
+        (["--agent", "scripted", "--max-steps", "50", "--horizons", "60"],
+         "--horizons 60: the rows play 50 steps"),
     ],
 )
 def test_bad_input_is_a_one_line_error(
