@@ -33,6 +33,7 @@ class CSteve1(SequenceBC):
         goal_dim: int = 512,
         conditioning: Conditioning = "head",
         head_hidden: int = 0,
+        goal_hidden: int = 0,
         lora_rank: int = 16,
         lora_alpha: float = 16.0,
         lora_dropout: float = 0.0,
@@ -57,6 +58,8 @@ class CSteve1(SequenceBC):
             ``film`` (scale and shift after the Transformer-XL: state-dependent, goal-free TrXL).
         head_hidden: width of a trainable hidden layer before C-VPT's linear policy head (VPT's
             head has one; 0: none, and head conditioning is one logit offset per goal).
+        goal_hidden: width of nonlinear goal features relu(V z) the conditioning reads beside z
+            (0: the goal enters linearly; see ``zoo.models.steve``).
         lora_rank: LoRA rank on the Transformer-XL (0: train the conditioning layer only).
         lora_alpha: LoRA scale numerator.
         lora_dropout: dropout on the LoRA branch.

@@ -20,6 +20,11 @@ per-feature scale and shift, x' = x * (1 + G z_t) + W z_t + b, with G zero at th
 the linear head the goal's effect is W_head (x * G z), which depends on the state through x,
 while the Transformer-XL pass stays goal-free (guidance and PPO-Steve's features as for head).
 
+Both read the goal linearly, so a goal that lies close to a mix of others (two captions whose
+prior goals are at cosine 0.8) can only get a mix of their behaviours. ``goal_hidden`` > 0 feeds
+the conditioning [z, relu(V z)] instead (V random, no bias, so a zero goal stays zero and the
+unconditional policy is unchanged): a goal can then act apart from its neighbours.
+
 Fine-tuning is LoRA on the Transformer-XL's linear layers (``peft``), plus the conditioning
 layer (and the head block); the image encoder, the TrXL's base weights, norms and the policy head stay frozen
 (``trainable_parameters`` names what trains).
@@ -61,6 +66,9 @@ class SteveConfig:
     head_hidden: int = 0
     """Width of the trainable hidden layer before the frozen linear policy head (0: none; then
     head conditioning is a state-independent logit offset per goal, see the module doc)."""
+    goal_hidden: int = 0
+    """Width of the goal's nonlinear features relu(V z) fed to the conditioning beside z (0:
+    the goal enters linearly)."""
     lora_rank: int = 16
     """Rank of the LoRA updates on the Transformer-XL (0: no LoRA, conditioning only)."""
     lora_alpha: float = 16.0
@@ -76,10 +84,10 @@ class SteveConfig:
     def __post_init__(self) -> None:
         if self.conditioning not in CONDITIONINGS:
             raise ValueError(f"conditioning={self.conditioning!r}: expected one of {CONDITIONINGS}")
-        if self.goal_dim < 1 or self.lora_rank < 0 or self.head_hidden < 0:
+        if self.goal_dim < 1 or min(self.lora_rank, self.head_hidden, self.goal_hidden) < 0:
             raise ValueError(
-                f"goal_dim={self.goal_dim} must be >= 1, lora_rank={self.lora_rank} and "
-                f"head_hidden={self.head_hidden} >= 0"
+                f"goal_dim={self.goal_dim} must be >= 1, lora_rank={self.lora_rank}, "
+                f"head_hidden={self.head_hidden} and goal_hidden={self.goal_hidden} >= 0"
             )
 
     @property
@@ -98,6 +106,7 @@ class SteveConfig:
             "goal_dim",
             "conditioning",
             "head_hidden",
+            "goal_hidden",
             "lora_rank",
             "lora_alpha",
             "lora_dropout",
@@ -117,12 +126,18 @@ class SteveModel(nn.Module):
         self.config = config
         self.backbone = backbone
         self.cvpt_config = backbone.config
-        self.condition = nn.Linear(config.goal_dim, backbone.config.d_model)
+        self.goal_net = None
+        if config.goal_hidden > 0:  # default (random) init: relu(V z) is nonzero from the start
+            self.goal_net = nn.Sequential(
+                nn.Linear(config.goal_dim, config.goal_hidden, bias=False), nn.ReLU()
+            )
+        width = config.goal_dim + config.goal_hidden
+        self.condition = nn.Linear(width, backbone.config.d_model)
         nn.init.zeros_(self.condition.weight)
         nn.init.zeros_(self.condition.bias)
         self.film_scale = None
         if config.conditioning == "film":
-            self.film_scale = nn.Linear(config.goal_dim, backbone.config.d_model, bias=False)
+            self.film_scale = nn.Linear(width, backbone.config.d_model, bias=False)
             nn.init.zeros_(self.film_scale.weight)
         self.head_block = _head_block(backbone.config.d_model, config.head_hidden)
         if config.lora_rank > 0:
@@ -134,7 +149,7 @@ class SteveModel(nn.Module):
             )
             inject_adapter_in_model(lora, backbone.trxl)
         for name, param in self.named_parameters():
-            trains = name.startswith(("condition.", "film_scale.", "head_block.")) or "lora_" in name
+            trains = name.startswith(_TRAINED) or "lora_" in name
             param.requires_grad_(trains)
 
     def trainable_parameters(self) -> dict[str, nn.Parameter]:
@@ -144,21 +159,26 @@ class SteveModel(nn.Module):
     def initial_state(self, batch: int, device: torch.device | str | None = None) -> TrXLState:
         return self.backbone.initial_state(batch, device)
 
-    def _goal_term(self, goal: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
+    def _goal_features(self, goal: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
+        """What the conditioning reads: z, or [z, relu(V z)] with ``goal_hidden``."""
         expected = (*like.shape[:2], self.config.goal_dim)
         if tuple(goal.shape) != expected:
             raise ValueError(
                 f"goal must have shape {expected} (batch, time, goal_dim), got {tuple(goal.shape)}"
             )
-        return self.condition(goal.to(self.condition.weight.dtype)).to(like.dtype)
+        goal = goal.to(self.condition.weight.dtype)
+        return goal if self.goal_net is None else torch.cat([goal, self.goal_net(goal)], -1)
+
+    def _goal_term(self, goal: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
+        return self.condition(self._goal_features(goal, like)).to(like.dtype)
 
     def _after_trxl(self, hidden: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         """Goal-conditioned features from goal-free TrXL features (head or FiLM)."""
-        shifted = hidden + self._goal_term(goal, hidden)
         if self.film_scale is None:
-            return shifted
-        scale = self.film_scale(goal.to(self.film_scale.weight.dtype)).to(hidden.dtype)
-        return shifted + hidden * scale
+            return hidden + self._goal_term(goal, hidden)
+        features = self._goal_features(goal, hidden)
+        shift = self.condition(features).to(hidden.dtype)
+        return hidden + shift + hidden * self.film_scale(features).to(hidden.dtype)
 
     def forward(
         self, frames: torch.Tensor, first: torch.Tensor, goal: torch.Tensor, state: TrXLState
@@ -216,6 +236,10 @@ class SteveModel(nn.Module):
         """Empty TrXL memory for ``guided_logits`` on ``batch`` envs."""
         rows = batch if self.config.goal_after_trxl else 2 * batch
         return self.initial_state(rows, device)
+
+
+_TRAINED = ("condition.", "film_scale.", "head_block.", "goal_net.")
+"""Parameter name prefixes that fine-tuning trains (besides LoRA's)."""
 
 
 def _head_block(width: int, hidden: int) -> nn.Sequential | None:

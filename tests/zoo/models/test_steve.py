@@ -124,6 +124,30 @@ def test_film_goal_effect_depends_on_the_state_over_a_linear_head() -> None:
     torch.testing.assert_close(shift, expected, rtol=1e-4, atol=1e-4)
 
 
+@pytest.mark.parametrize("goal_hidden", [0, 16])
+def test_goal_hidden_reads_the_goal_nonlinearly_and_keeps_the_zero_goal(goal_hidden: int) -> None:
+    """Linear conditioning gives -z the opposite logit shift of z (so a goal between two
+    others gets a mix of theirs); [z, relu(V z)] does not. Either way the zero goal (the
+    unconditional policy of guidance) is x + b, and the untrained model is its C-VPT."""
+    frames, first, goal = _inputs()
+    cvpt = _backbone()
+    expected, _ = cvpt(frames, first, cvpt.initial_state(2))
+    config = SteveConfig(goal_dim=GOAL_DIM, conditioning="film", goal_hidden=goal_hidden)
+    steve = SteveModel(_backbone(), config)
+    logits, _ = steve(frames, first, goal, steve.initial_state(2))
+    torch.testing.assert_close(logits, expected, rtol=1e-5, atol=1e-5)
+    assert any(n.startswith("goal_net.") for n in steve.trainable_parameters()) == (goal_hidden > 0)
+    _randomise_trainable(steve)
+    hidden = torch.randn(10, 1, 32, generator=torch.Generator().manual_seed(0))
+    z = torch.randn(1, 1, GOAL_DIM).expand(10, 1, GOAL_DIM)
+    with torch.no_grad():
+        none = steve._after_trxl(hidden, torch.zeros_like(z))
+        plus, minus = steve._after_trxl(hidden, z) - none, steve._after_trxl(hidden, -z) - none
+    torch.testing.assert_close(none, hidden + steve.condition.bias)
+    asymmetry = (plus + minus).abs().max().item()
+    assert asymmetry > 0.1 if goal_hidden else asymmetry < 1e-5
+
+
 def test_combine_guidance_on_fixed_logits() -> None:
     cond = torch.tensor([[2.0, 0.0, -1.0]])
     uncond = torch.tensor([[1.0, 1.0, 1.0]])
