@@ -59,7 +59,7 @@ DESCRIPTION = (
     "worse than it) and OUT/matrix.png; each row is saved as OUT/<game>/<row>.json, and a rerun "
     "reads the saved rows instead of playing them."
 )
-HORIZONS = "also score the same episodes within their first H steps, for each H < --max-steps"
+HORIZONS = "also score the same episodes within their first H steps (each H <= --max-steps)"
 
 
 @dataclass(frozen=True)
