@@ -37,9 +37,9 @@ def test_shipped_folder_verifies_and_loads(folder: Path) -> None:
 
 
 def test_shipped_c_steve_1_plays_at_the_scale_its_card_measured() -> None:
-    """Its card's tables are at guidance 0.5 and temperature 1; config.json records both, so
+    """Its card's tables are at guidance 1 and temperature 1; config.json records both, so
     loading without arguments plays as measured (the paper's 1.5 is for exports without it)."""
     folder = WEIGHTS / "csteve1_cpu"
-    assert inference_settings(folder, "csteve1") == {"cfg_scale": 0.5, "temperature": 1.0}
+    assert inference_settings(folder, "csteve1") == {"cfg_scale": 1.0, "temperature": 1.0}
     policy = StevePolicy.load(folder)
-    assert (policy.cfg_scale, policy.temperature, policy.greedy) == (0.5, 1.0, False)
+    assert (policy.cfg_scale, policy.temperature, policy.greedy) == (1.0, 1.0, False)
