@@ -157,6 +157,13 @@ def _generate(args) -> int:
         args._parser.error("--expert ppo needs --checkpoint PATH")
     if args.expert_option and args.expert != "scripted":
         args._parser.error(f"--expert-option applies to --expert scripted, not {args.expert}")
+    if args.expert_option:
+        from zoo.experts.scripted.config import ExpertConfig
+
+        try:
+            ExpertConfig(**dict(args.expert_option))
+        except ValueError as err:
+            args._parser.error(f"--expert-option: {err}")
     if args.instructions is not None and args.expert != "scripted":
         args._parser.error(f"--instructions needs --expert scripted, not {args.expert}")
     _check_frames(args)

@@ -121,6 +121,25 @@ def test_bad_expert_options_give_clear_errors(tmp_path, capsys, extra, message):
     assert message in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [
+        ("mine_cost=12", "near_zombie_cost is 16: the planner's step costs must stay <= 15"),
+        ("bridge_cost=0", "mine_cost and bridge_cost must be >= 1"),
+    ],
+)
+def test_path_costs_the_planner_cannot_take_are_refused_before_playing(
+    tmp_path, capsys, option, message
+):
+    out = tmp_path / "new"
+    with pytest.raises(SystemExit) as exit_info:
+        main(["data", "generate", "--expert", "scripted", "--episodes", "1", "--seed", "0",
+              "--out", str(out), "--expert-option", option])
+    assert exit_info.value.code == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_expert_options_need_the_scripted_expert(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main([*GENERATE, "--out", str(tmp_path / "new"), "--expert-option", "plants_first=true"])

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from zoo.experts.scripted.navigation import MAX_COST
+
 
 @dataclass(frozen=True)
 class ExpertConfig:
@@ -82,3 +84,17 @@ class ExpertConfig:
     """Path cost of bridging water (place stone, mine it, step)."""
     near_zombie_cost: int = 4
     """Extra path cost of cells next to a zombie (walking up to one gives it the first hit)."""
+
+    def __post_init__(self) -> None:
+        # checked here, not in the first planner step deep inside a generation job
+        if min(self.mine_cost, self.bridge_cost) < 1 or self.near_zombie_cost < 0:
+            raise ValueError(
+                f"mine_cost and bridge_cost must be >= 1 and near_zombie_cost >= 0, got "
+                f"{self.mine_cost}, {self.bridge_cost} and {self.near_zombie_cost}"
+            )
+        worst = max(self.mine_cost, self.bridge_cost) + self.near_zombie_cost
+        if worst > MAX_COST:
+            raise ValueError(
+                f"max(mine_cost, bridge_cost) + near_zombie_cost is {worst}: the planner's step "
+                f"costs must stay <= {MAX_COST}"
+            )
