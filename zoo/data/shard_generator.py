@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,7 +27,7 @@ from zoo.data.shards import (
     BufferPool,
     ChunkEncoder,
     EpisodeRecorder,
-    assemble_shard,
+    ShardAssembler,
     state_views,
 )
 from zoo.envs.base import Step, episode_seed
@@ -216,9 +217,12 @@ class ShardGenerator:
         agreed = np.zeros(self.num_envs, np.int64)  # DAgger: learner's action == the label
         drove = np.zeros(self.num_envs, np.int64)  # DAgger: steps the expert acted
         recorders: list[EpisodeRecorder | None] = [None] * self.num_envs
+        appended: list[Future] = []  # each finished episode's fragment, copied into the shard
         seeds = np.zeros(self.num_envs, np.int64)
 
-        with ChunkEncoder(max_pending=self.num_envs + 1, pool=self.buffers) as encoder:
+        path = Path(out) / SHARD_PATTERN.format(index=index)
+        with (ShardAssembler(path, cfg.shard_episodes(index)) as assembler,
+              ChunkEncoder(max_pending=self.num_envs + 1, pool=self.buffers) as encoder):
 
             def start(slot: int) -> bool:
                 episode = next(episodes, None)
@@ -267,6 +271,8 @@ class ShardGenerator:
                     frames += 1
                     if dones[slot]:
                         summaries[rec.episode] = self._summary(rec, slot)
+                        # appended to the shard on the encoder, after its fragment is written
+                        appended.append(encoder.submit(assembler.add, rec.episode, rec.fragment))
                         if cfg.dagger is not None:
                             summaries[rec.episode]["dagger"] = (int(agreed[slot]), int(drove[slot]))
                         if progress:
@@ -288,17 +294,11 @@ class ShardGenerator:
             if progress and frames:
                 progress(0, frames)
             order = sorted(summaries)
-            written = {e: summaries[e].pop("written") for e in order}
-
-            def fragments() -> Iterator[Path]:
-                # each episode's fragment is copied into the shard as soon as it is written,
-                # while the encoder still codes the last chunks of the next ones
-                for e in order:
-                    written[e].result()  # raises if writing the fragment failed
-                    yield workdir / f"e{e:07d}.tar"
-
-            path = Path(out) / SHARD_PATTERN.format(index=index)
-            sha = assemble_shard(fragments(), path)
+            for e in order:
+                summaries[e].pop("written").result()  # raises if writing a fragment failed
+            for future in appended:
+                future.result()  # raises if copying one into the shard failed
+            sha = encoder.submit(assembler.close).result()
         shutil.rmtree(workdir, ignore_errors=True)
         return self._entry(index, path, sha, [summaries[e] for e in order])
 

@@ -36,7 +36,6 @@ from zoo.data.codec import (
 from zoo.data.noop import noop_runs
 from zoo.data.rerender import encode_rendered
 from zoo.envs.schema import FRAME_SHAPE, STATE_FIELDS, State
-from zoo.files import atomic_path
 
 SHARD_PATTERN = "crafterplay-{index:06d}.tar"
 FRAMES, STATE, STEPS, META = "frames.zst", "state.zst", "steps.zst", "meta.json"
@@ -328,35 +327,98 @@ class EpisodeRecorder:
         self.spool.unlink()
 
 
+class TarWriter:
+    """Tar member bytes written to a temp name beside ``path`` and hashed as they go;
+    ``close`` adds the end-of-archive trailer, syncs and renames (a killed writer leaves no
+    half file), ``discard`` removes the temp file. Written data is synced every
+    ``sync_every`` bytes, so the final sync does not wait on a whole shard's disk writes."""
+
+    def __init__(self, path: Path, sync_every: int = 32 << 20) -> None:
+        self.path, self.sync_every = Path(path), sync_every
+        self._tmp = self.path.with_name(f"{self.path.name}.tmp-{os.getpid()}")
+        self._out = open(self._tmp, "wb")
+        self._digest = hashlib.sha256()
+        self._size = self._unsynced = 0
+
+    def write(self, block: bytes) -> None:
+        self._out.write(block)
+        self._digest.update(block)
+        self._size += len(block)
+        self._unsynced += len(block)
+        if self._unsynced >= self.sync_every:
+            self._out.flush()
+            os.fdatasync(self._out.fileno())
+            self._unsynced = 0
+
+    def close(self) -> str:
+        """Finish the file; its sha256."""
+        trailer = tar_trailer(self._size)
+        self._out.write(trailer)
+        self._digest.update(trailer)
+        self._out.flush()
+        os.fsync(self._out.fileno())
+        self._out.close()
+        os.replace(self._tmp, self.path)
+        return self._digest.hexdigest()
+
+    def discard(self) -> None:
+        self._out.close()
+        self._tmp.unlink(missing_ok=True)
+
+
 def write_tar(path: Path, blocks: Iterable[bytes]) -> str:
-    """Write tar member ``blocks`` and the end-of-archive trailer to ``path`` via a temp name
-    (renamed when complete and synced, so a killed writer leaves no half shard); its sha256."""
-    digest, size = hashlib.sha256(), 0
-    with atomic_path(path) as tmp, open(tmp, "wb") as out:
+    """Write tar member ``blocks`` and the trailer to ``path`` (``TarWriter``); its sha256."""
+    writer = TarWriter(path)
+    try:
         for block in blocks:
-            out.write(block)
-            digest.update(block)
-            size += len(block)
-        trailer = tar_trailer(size)
-        out.write(trailer)
-        digest.update(trailer)
-        out.flush()
-        os.fsync(out.fileno())
-    return digest.hexdigest()
+            writer.write(block)
+        return writer.close()
+    finally:
+        writer.discard()  # a no-op once closed
 
 
-def _file_blocks(paths: Iterable[Path], read: list[Path]) -> Iterator[bytes]:
-    for fragment in paths:
-        read.append(fragment)
-        with open(fragment, "rb") as f:
-            yield from iter(lambda f=f: f.read(1 << 20), b"")
+class ShardAssembler:
+    """A shard built while it is played: each episode's fragment is appended (then deleted)
+    as soon as it and every episode before it are written, so when play ends only the last
+    fragments, the trailer and the sync are left (before, the whole shard was copied, hashed
+    and synced then, with both cores idle but one). ``add`` and ``close`` run on one thread:
+    the generator's encoder, after the fragment writes they follow."""
+
+    def __init__(self, path: Path, episodes: Iterable[int]) -> None:
+        self._writer = TarWriter(path)
+        self._order = deque(episodes)
+        self._ready: dict[int, Path] = {}
+
+    def add(self, episode: int, fragment: Path) -> None:
+        """Episode ``episode``'s fragment is complete at ``fragment``."""
+        self._ready[episode] = fragment
+        while self._order and self._order[0] in self._ready:
+            path = self._ready.pop(self._order.popleft())
+            with open(path, "rb") as f:
+                for block in iter(lambda f=f: f.read(1 << 20), b""):
+                    self._writer.write(block)
+            path.unlink()
+
+    def close(self) -> str:
+        """The shard, renamed into place; its sha256. RuntimeError if an episode is missing."""
+        if self._order:
+            raise RuntimeError(f"{self._writer.path}: episodes {list(self._order)} were never added")
+        return self._writer.close()
+
+    def discard(self) -> None:
+        self._writer.discard()
+
+    def __enter__(self) -> ShardAssembler:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.discard()  # after ``close``: nothing left to remove
 
 
 def assemble_shard(fragments: Iterable[Path], path: Path) -> str:
-    """Concatenate episode fragments into ``path`` (via a temp name); return its sha256.
-    ``fragments`` is read lazily: an iterator may wait for each one to be written."""
-    read: list[Path] = []
-    sha = write_tar(path, _file_blocks(fragments, read))
-    for fragment in read:
-        fragment.unlink()
-    return sha
+    """Concatenate episode fragments, in order, into ``path``; return its sha256."""
+    fragments = list(fragments)
+    with ShardAssembler(path, range(len(fragments))) as assembler:
+        for k, fragment in enumerate(fragments):
+            assembler.add(k, fragment)
+        return assembler.close()
