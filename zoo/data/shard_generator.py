@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from zoo.data.codec import FrameCodec
+from zoo.data.codec import PLANES_SHAPE, FrameCodec
 from zoo.data.manifest import package_versions
 from zoo.data.noop import noop_counts, noop_flags, noop_runs
 from zoo.data.rerender import renderer_version
@@ -223,6 +223,11 @@ class ShardGenerator:
         path = Path(out) / SHARD_PATTERN.format(index=index)
         with (ShardAssembler(path, cfg.shard_episodes(index)) as assembler,
               ChunkEncoder(max_pending=self.num_envs + 1, pool=self.buffers) as encoder):
+            # as many as can be in use: a chunk filling per env, and the queued and coding ones
+            in_use = 2 * self.num_envs + 2
+            if self.renderer is None:  # stored frames are laid out in pooled buffers
+                encoder.submit(self.buffers.prefill, (3, cfg.chunk_length, *PLANES_SHAPE[1:]), in_use)
+            encoder.submit(self.buffers.prefill, (cfg.chunk_length, STATE_ROW_BYTES), in_use)
 
             def start(slot: int) -> bool:
                 episode = next(episodes, None)
