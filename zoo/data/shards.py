@@ -130,25 +130,34 @@ class BufferPool:
 
     def __init__(self) -> None:
         self._spare: dict[tuple[int, ...], deque[np.ndarray]] = {}  # deques: thread-safe
-        self._made: dict[tuple[int, ...], int] = {}
+        self._made: dict[tuple[int, ...], int] = {}  # buffers made per shape, in use or not
+        self._lock = threading.Lock()  # for _made: take and prefill run on two threads
 
     def take(self, shape: tuple[int, ...]) -> np.ndarray:
         """A uint8 buffer of ``shape``, a spare one if any (contents undefined)."""
         try:
             return self._spare[shape].pop()
         except (KeyError, IndexError):
-            self._made[shape] = self._made.get(shape, 0) + 1
+            self._count(shape)
             return np.empty(shape, np.uint8)
 
     def prefill(self, shape: tuple[int, ...], count: int) -> None:
         """Make buffers of ``shape`` until ``count`` exist, each page touched: run on the
         encoder thread at a shard's start, so the page faults of a fresh buffer (~90 ms per
         16 MB here, ~350 us a frame of layout) are not taken by the playing thread."""
-        while self._made.get(shape, 0) < count:
-            self._made[shape] = self._made.get(shape, 0) + 1
+        while self._count(shape, below=count):
             buf = np.empty(shape, np.uint8)
             buf.reshape(-1)[:: mmap.PAGESIZE] = 0
             self.give(buf)
+
+    def _count(self, shape: tuple[int, ...], below: int | None = None) -> bool:
+        """Count one more buffer of ``shape`` (if fewer than ``below`` exist); whether it did."""
+        with self._lock:
+            made = self._made.get(shape, 0)
+            if below is not None and made >= below:
+                return False
+            self._made[shape] = made + 1
+            return True
 
     def give(self, buf: np.ndarray) -> None:
         """Take back a buffer no one uses any more (the encoder thread calls it)."""
@@ -394,7 +403,7 @@ class ShardAssembler:
     """A shard built while it is played: each episode's fragment is appended (then deleted)
     as soon as it and every episode before it are written, so when play ends only the last
     fragments, the trailer and the sync are left (before, the whole shard was copied, hashed
-    and synced then, with both cores idle but one). ``add`` and ``close`` run on one thread:
+    and synced only then, on one core). ``add`` and ``close`` run on one thread:
     the generator's encoder, after the fragment writes they follow."""
 
     def __init__(self, path: Path, episodes: Iterable[int]) -> None:
