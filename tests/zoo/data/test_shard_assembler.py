@@ -44,7 +44,7 @@ def test_a_missing_episode_fails_close_and_leaves_no_shard(tmp_path):
     assert list(tmp_path.glob("shard.tar*")) == []
 
 
-def test_write_tar_syncs_in_pieces_and_hashes_what_it_wrote(tmp_path):
+def test_write_tar_and_a_writer_synced_in_pieces_write_and_hash_the_same_bytes(tmp_path):
     blocks = [tar_member(f"m{k}", bytes([k]) * 3000) for k in range(5)]
     path = tmp_path / "t.tar"
     sha = write_tar(path, blocks)
@@ -53,3 +53,5 @@ def test_write_tar_syncs_in_pieces_and_hashes_what_it_wrote(tmp_path):
     for block in blocks:
         writer.write(block)
     assert writer.close() == sha
+    assert (tmp_path / "u.tar").read_bytes() == path.read_bytes()
+    assert list(tmp_path.glob("*.tmp-*")) == []
