@@ -167,10 +167,11 @@ class BufferPool:
 class ChunkEncoder(ThreadPoolExecutor):
     """One background thread for compression and fragment writing, in submission order.
 
-    ``submit`` blocks while ``max_pending`` jobs wait, so raw chunks queued for compression
-    (16 MB each at L=256) stay bounded when the encoder is slower than the envs. Recorders
-    take their frame buffers from ``pool`` (a new one by default) and the encoder gives them
-    back once coded.
+    ``submit_chunk`` blocks while ``max_pending`` chunks wait, so raw chunks queued for
+    compression (16 MB each at L=256) stay bounded when the encoder is slower than the envs.
+    Other jobs (fragment writes, shard appends) hold no buffer and never block: taking slots
+    too, their bursts at episodes' ends stalled play (~7% of the stored mode's time).
+    Recorders take their buffers from ``pool`` (a new one by default), given back once coded.
     """
 
     def __init__(self, max_pending: int, pool: BufferPool | None = None) -> None:
@@ -178,9 +179,10 @@ class ChunkEncoder(ThreadPoolExecutor):
         self._slots = threading.BoundedSemaphore(max_pending)
         self.pool = BufferPool() if pool is None else pool
 
-    def submit(self, fn, /, *args, **kwargs) -> Future:
+    def submit_chunk(self, fn, /, *args) -> Future:
+        """``submit`` for a job that holds a chunk's buffers: waits for a free slot first."""
         self._slots.acquire()
-        future = super().submit(fn, *args, **kwargs)
+        future = self.submit(fn, *args)
         future.add_done_callback(lambda _: self._slots.release())
         return future
 
@@ -304,7 +306,8 @@ class EpisodeRecorder:
             args = (planes, rows, None)
         else:
             args = (self._frames[:n].copy() if self._drawn else None, rows, self._rng[:n].copy())
-        job = self.encoder.submit(_spool_chunk, self.spool, n, *args, self.codec, self.encoder.pool)
+        job = self.encoder.submit_chunk(
+            _spool_chunk, self.spool, n, *args, self.codec, self.encoder.pool)
         self._chunks.append(job)
         self._fill = 0
 

@@ -172,7 +172,7 @@ def test_decode_sample_wrong_shape(shards):
         decode_sample(sample)
 
 
-def test_chunk_encoder_bounds_queued_jobs():
+def test_chunk_encoder_bounds_queued_chunks_but_not_other_jobs():
     # A broken bound must fail, not hang: the first job is always released (leaving the
     # block shuts the encoder down, which waits for it), every wait has a timeout and the
     # submitting thread is a daemon, so one stuck forever cannot keep pytest alive.
@@ -180,15 +180,18 @@ def test_chunk_encoder_bounds_queued_jobs():
     with ChunkEncoder(max_pending=1) as encoder:
 
         def submit_second() -> None:
-            encoder.submit(int)
+            encoder.submit_chunk(int)
             submitted.set()
 
         blocked = threading.Thread(target=submit_second, daemon=True)
         try:
-            encoder.submit(release.wait, 10)
+            encoder.submit_chunk(release.wait, 10)
+            small = encoder.submit(int)  # a fragment write or an append: never waits
             blocked.start()
-            assert not submitted.wait(0.2)  # the second job waits for the first to finish
+            assert not submitted.wait(0.2)  # the second chunk waits for the first to finish
+            assert not small.done()  # queued behind the first chunk, in submission order
         finally:
             release.set()
         assert submitted.wait(5)
         blocked.join(5)
+        assert small.result(5) == 0
