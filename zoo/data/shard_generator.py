@@ -11,7 +11,6 @@ from __future__ import annotations
 import os
 import shutil
 from collections.abc import Callable
-from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,9 +26,10 @@ from zoo.data.shards import (
     BufferPool,
     ChunkEncoder,
     EpisodeRecorder,
-    ShardAssembler,
+    FragmentSink,
     state_views,
 )
+from zoo.data.tar_writer import ShardAssembler
 from zoo.envs.base import Step, episode_seed
 from zoo.envs.constants import ACHIEVEMENT_NAMES
 from zoo.envs.tasks.starts import START_STATES, TaskStartEnv
@@ -217,7 +217,6 @@ class ShardGenerator:
         agreed = np.zeros(self.num_envs, np.int64)  # DAgger: learner's action == the label
         drove = np.zeros(self.num_envs, np.int64)  # DAgger: steps the expert acted
         recorders: list[EpisodeRecorder | None] = [None] * self.num_envs
-        appended: list[Future] = []  # each finished episode's fragment, copied into the shard
         seeds = np.zeros(self.num_envs, np.int64)
 
         path = Path(out) / SHARD_PATTERN.format(index=index)
@@ -275,9 +274,8 @@ class ShardGenerator:
                     rec.observe(_frame(after, slot), None, rngs[slot], rows[slot])
                     frames += 1
                     if dones[slot]:
-                        summaries[rec.episode] = self._summary(rec, slot)
-                        # appended to the shard on the encoder, after its fragment is written
-                        appended.append(encoder.submit(assembler.add, rec.episode, rec.fragment))
+                        # the fragment goes into the shard on the encoder, at its turn
+                        summaries[rec.episode] = self._summary(rec, slot, assembler.add_blocks)
                         if cfg.dagger is not None:
                             summaries[rec.episode]["dagger"] = (int(agreed[slot]), int(drove[slot]))
                         if progress:
@@ -301,8 +299,6 @@ class ShardGenerator:
             order = sorted(summaries)
             for e in order:
                 summaries[e].pop("written").result()  # raises if writing a fragment failed
-            for future in appended:
-                future.result()  # raises if copying one into the shard failed
             sha = encoder.submit(assembler.close).result()
         shutil.rmtree(workdir, ignore_errors=True)
         return self._entry(index, path, sha, [summaries[e] for e in order])
@@ -346,10 +342,10 @@ class ShardGenerator:
             if recorders[slot] is not None:
                 recorders[slot].observe(_frame(step, slot), None, rngs[slot], rows[slot])
 
-    def _summary(self, rec: EpisodeRecorder, slot: int) -> dict:
-        """Finish the episode and keep what the manifest reports about it."""
+    def _summary(self, rec: EpisodeRecorder, slot: int, sink: FragmentSink) -> dict:
+        """Finish the episode (its fragment to ``sink``), keep what the manifest reports."""
         segments = None if self.scheduler is None else self.scheduler.finish(slot)
-        written = rec.finish(None if segments is None else {"instructions": segments})
+        written = rec.finish(None if segments is None else {"instructions": segments}, sink)
         noop = np.asarray(rec.noop, bool)
         actions = np.asarray(rec.actions)
         counts = noop_counts(

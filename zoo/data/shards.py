@@ -13,13 +13,11 @@ residuals against re-renders from its states (RESIDUAL + RENDER, see ``zoo.data.
 
 from __future__ import annotations
 
-import hashlib
 import mmap
 import os
-import tarfile
 import threading
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
@@ -36,33 +34,17 @@ from zoo.data.codec import (
 )
 from zoo.data.noop import noop_runs
 from zoo.data.rerender import encode_rendered
+from zoo.data.tar_writer import tar_member
 from zoo.envs.schema import FRAME_SHAPE, STATE_FIELDS, State
 
 SHARD_PATTERN = "crafterplay-{index:06d}.tar"
 FRAMES, STATE, STEPS, META = "frames.zst", "state.zst", "steps.zst", "meta.json"
 RESIDUAL, RENDER = "residual.zst", "render.zst"  # rendered chunks: in place of FRAMES
-_BLOCK = tarfile.BLOCKSIZE
 
 
 def sample_key(episode: int, offset: int) -> str:
     """WebDataset key of the chunk of ``episode`` starting at step ``offset``."""
     return f"e{episode:07d}_{offset:06d}"
-
-
-def tar_member(name: str, data: bytes) -> bytes:
-    """One regular-file tar member with a fixed header, padded to the 512-byte block."""
-    info = tarfile.TarInfo(name)
-    info.size, info.mtime, info.mode = len(data), 0, 0o644
-    info.uid = info.gid = 0
-    info.uname = info.gname = ""
-    header = info.tobuf(tarfile.USTAR_FORMAT, "utf-8", "strict")
-    return header + data + b"\0" * (-len(data) % _BLOCK)
-
-
-def tar_trailer(size: int) -> bytes:
-    """End-of-archive blocks, padded to tar's 10 KiB record as tarfile writes it."""
-    end = size + 2 * _BLOCK
-    return b"\0" * (2 * _BLOCK + (-end % tarfile.RECORDSIZE))
 
 
 def _state_layout() -> tuple[dict[str, tuple[int, int]], int]:
@@ -118,6 +100,10 @@ def _spool_chunk(
         offset = f.tell()
         f.write(b"".join(members.values()))
     return offset, [(name, len(data)) for name, data in members.items()], meta
+
+
+FragmentSink = Callable[[int, Iterator[bytes], Path], None]
+"""``sink(episode, blocks, fragment)``: where an episode's tar blocks go once it ends."""
 
 
 class BufferPool:
@@ -311,11 +297,12 @@ class EpisodeRecorder:
         self._chunks.append(job)
         self._fill = 0
 
-    def finish(self, episode_meta: dict | None = None) -> Future:
+    def finish(self, episode_meta: dict | None = None, sink: FragmentSink | None = None) -> Future:
         """Close the episode after its final observation. The fragment is written on the
         encoder (after the episode's chunks), so play goes on meanwhile; wait on the result.
         ``episode_meta`` (what is known of the episode only at its end) goes into the meta of
-        each of its chunks."""
+        each of its chunks. ``sink(episode, blocks, fragment)`` takes the fragment's tar
+        blocks (``ShardAssembler.add_blocks``); by default they are written to ``fragment``."""
         if self._fill:
             self._flush()
         self.act(-1, 0.0, False)
@@ -327,12 +314,23 @@ class EpisodeRecorder:
         steps["noop_run"] = noop_runs(steps["noop"])
         if self.instructions is not None:
             steps["instruction"] = np.asarray(self.instructions, np.int16)
-        return self.encoder.submit(self._write_fragment, steps, episode_meta or {})
+        return self.encoder.submit(self._write_fragment, steps, episode_meta or {}, sink)
 
-    def _write_fragment(self, steps: dict[str, np.ndarray], episode_meta: dict) -> None:
+    def _write_fragment(self, steps: dict[str, np.ndarray], episode_meta: dict,
+                        sink: FragmentSink | None) -> None:
+        blocks = self._fragment_blocks(steps, episode_meta)
+        if sink is not None:
+            sink(self.episode, blocks, self.fragment)
+        else:
+            with open(self.fragment, "wb") as out:
+                out.writelines(blocks)
+        self.spool.unlink()
+
+    def _fragment_blocks(self, steps: dict[str, np.ndarray], episode_meta: dict) -> Iterator[bytes]:
+        """The episode's samples as tar member blocks, read back from the spool."""
         length = len(steps["actions"])
         spans = [future.result() for future in self._chunks]  # done: same single thread
-        with open(self.spool, "rb") as spool, open(self.fragment, "wb") as out:
+        with open(self.spool, "rb") as spool:
             for k, (offset, members, extra) in enumerate(spans):
                 start = k * self.chunk_length
                 stop = min(start + self.chunk_length, length)
@@ -343,107 +341,8 @@ class EpisodeRecorder:
                     "episode": self.episode, "seed": self.seed, "offset": start,
                     "length": stop - start, "episode_length": length, "last": stop == length,
                 }
-                out.writelines(
-                    tar_member(f"{key}.{name}", spool.read(size)) for name, size in members
-                )
+                for name, size in members:
+                    yield tar_member(f"{key}.{name}", spool.read(size))
                 chunk_steps = {name: arr[start:stop] for name, arr in steps.items()}
-                out.write(tar_member(f"{key}.{STEPS}", encode_arrays(chunk_steps, self.codec)))
-                out.write(tar_member(f"{key}.{META}", encode_json(meta)))
-        self.spool.unlink()
-
-
-class TarWriter:
-    """Tar member bytes written to a temp name beside ``path`` and hashed as they go;
-    ``close`` adds the end-of-archive trailer, syncs and renames (a killed writer leaves no
-    half file), ``discard`` removes the temp file. Written data is synced every
-    ``sync_every`` bytes, so the final sync does not wait on a whole shard's disk writes."""
-
-    def __init__(self, path: Path, sync_every: int = 32 << 20) -> None:
-        self.path, self.sync_every = Path(path), sync_every
-        self._tmp = self.path.with_name(f"{self.path.name}.tmp-{os.getpid()}")
-        self._out = open(self._tmp, "wb")
-        self._digest = hashlib.sha256()
-        self._size = self._unsynced = 0
-
-    def write(self, block: bytes) -> None:
-        self._out.write(block)
-        self._digest.update(block)
-        self._size += len(block)
-        self._unsynced += len(block)
-        if self._unsynced >= self.sync_every:
-            self._out.flush()
-            os.fdatasync(self._out.fileno())
-            self._unsynced = 0
-
-    def close(self) -> str:
-        """Finish the file; its sha256."""
-        trailer = tar_trailer(self._size)
-        self._out.write(trailer)
-        self._digest.update(trailer)
-        self._out.flush()
-        os.fsync(self._out.fileno())
-        self._out.close()
-        os.replace(self._tmp, self.path)
-        return self._digest.hexdigest()
-
-    def discard(self) -> None:
-        self._out.close()
-        self._tmp.unlink(missing_ok=True)
-
-
-def write_tar(path: Path, blocks: Iterable[bytes]) -> str:
-    """Write tar member ``blocks`` and the trailer to ``path`` (``TarWriter``); its sha256."""
-    writer = TarWriter(path)
-    try:
-        for block in blocks:
-            writer.write(block)
-        return writer.close()
-    finally:
-        writer.discard()  # a no-op once closed
-
-
-class ShardAssembler:
-    """A shard built while it is played: each episode's fragment is appended (then deleted)
-    as soon as it and every episode before it are written, so when play ends only the last
-    fragments, the trailer and the sync are left (before, the whole shard was copied, hashed
-    and synced only then, on one core). ``add`` and ``close`` run on one thread:
-    the generator's encoder, after the fragment writes they follow."""
-
-    def __init__(self, path: Path, episodes: Iterable[int]) -> None:
-        self._writer = TarWriter(path)
-        self._order = deque(episodes)
-        self._ready: dict[int, Path] = {}
-
-    def add(self, episode: int, fragment: Path) -> None:
-        """Episode ``episode``'s fragment is complete at ``fragment``."""
-        self._ready[episode] = fragment
-        while self._order and self._order[0] in self._ready:
-            path = self._ready.pop(self._order.popleft())
-            with open(path, "rb") as f:
-                for block in iter(lambda f=f: f.read(1 << 20), b""):
-                    self._writer.write(block)
-            path.unlink()
-
-    def close(self) -> str:
-        """The shard, renamed into place; its sha256. RuntimeError if an episode is missing."""
-        if self._order:
-            raise RuntimeError(f"{self._writer.path}: episodes {list(self._order)} were never added")
-        return self._writer.close()
-
-    def discard(self) -> None:
-        self._writer.discard()
-
-    def __enter__(self) -> ShardAssembler:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.discard()  # after ``close``: nothing left to remove
-
-
-def assemble_shard(fragments: Iterable[Path], path: Path) -> str:
-    """Concatenate episode fragments, in order, into ``path``; return its sha256."""
-    fragments = list(fragments)
-    with ShardAssembler(path, range(len(fragments))) as assembler:
-        for k, fragment in enumerate(fragments):
-            assembler.add(k, fragment)
-        return assembler.close()
+                yield tar_member(f"{key}.{STEPS}", encode_arrays(chunk_steps, self.codec))
+                yield tar_member(f"{key}.{META}", encode_json(meta))

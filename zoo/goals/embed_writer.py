@@ -26,7 +26,7 @@ from zoo.captions.rules import CATEGORIES, EpisodeView
 from zoo.captions.vocabulary import load_vocabulary
 from zoo.data.manifest import MANIFEST, load_manifest
 from zoo.data.reader import CorruptShardError, iter_episodes
-from zoo.data.shards import tar_member, write_tar
+from zoo.data.tar_writer import tar_member, write_tar
 from zoo.envs.schema import FRAME_SHAPE
 from zoo.files import atomic_write_text, sha256_file
 from zoo.goals.embed import (

@@ -21,9 +21,9 @@ from zoo.data.shards import (
     BufferPool,
     ChunkEncoder,
     EpisodeRecorder,
-    assemble_shard,
     state_views,
 )
+from zoo.data.tar_writer import assemble_shard
 from zoo.envs.schema import STATE_FIELDS, empty_state, index_state
 
 TILE, GRID = 16, 9

@@ -17,7 +17,8 @@ from zoo.data.reader import (
     iter_chunks,
     iter_episodes,
 )
-from zoo.data.shards import ChunkEncoder, EpisodeRecorder, assemble_shard
+from zoo.data.shards import ChunkEncoder, EpisodeRecorder
+from zoo.data.tar_writer import assemble_shard
 from zoo.envs.schema import STATE_FIELDS, empty_state, index_state
 
 

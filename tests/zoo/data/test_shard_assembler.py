@@ -6,7 +6,7 @@ import tarfile
 
 import pytest
 
-from zoo.data.shards import ShardAssembler, TarWriter, tar_member, tar_trailer, write_tar
+from zoo.data.tar_writer import ShardAssembler, TarWriter, tar_member, tar_trailer, write_tar
 
 
 def _fragments(tmp_path, count: int) -> list:
@@ -32,6 +32,26 @@ def test_fragments_added_out_of_order_give_the_in_order_shard(tmp_path):
     assert not any(p.exists() for p in fragments)  # each is deleted once copied
     with tarfile.open(shard) as tar:
         assert tar.getnames() == [f"e{e}.meta.json" for e in range(4)]
+
+
+def test_blocks_go_straight_in_at_their_turn_and_wait_in_a_file_before_it(tmp_path):
+    blocks = {e: [tar_member(f"e{e}.{k}", bytes([e, k]) * 700) for k in range(3)] for e in range(4)}
+    expected = b"".join(b for e in range(4) for b in blocks[e])
+    expected += tar_trailer(len(expected))
+    spills = {e: tmp_path / f"e{e}.tar" for e in range(4)}
+    shard = tmp_path / "shard.tar"
+    with ShardAssembler(shard, range(4)) as assembler:
+        assembler.add_blocks(1, iter(blocks[1]), spills[1])  # early: waits in its file
+        assert spills[1].read_bytes() == b"".join(blocks[1])
+        assembler.add_blocks(0, iter(blocks[0]), spills[0])  # its turn: no file, then 1 too
+        assert not spills[0].exists() and not spills[1].exists()
+        spills[3].write_bytes(b"".join(blocks[3]))
+        assembler.add(3, spills[3])  # a fragment file and blocks mix
+        assembler.add_blocks(2, iter(blocks[2]), spills[2])
+        sha = assembler.close()
+    assert shard.read_bytes() == expected
+    assert sha == hashlib.sha256(expected).hexdigest()
+    assert list(tmp_path.iterdir()) == [shard]
 
 
 def test_a_missing_episode_fails_close_and_leaves_no_shard(tmp_path):
