@@ -136,7 +136,7 @@ def compact_planes(planes: np.ndarray, n: int) -> np.ndarray:
     length = planes.shape[1]
     if not planes.flags.c_contiguous or not 0 <= n <= length:
         raise ValueError(f"need a C-contiguous buffer of at least {n} frames, got {planes.shape}")
-    flat, frame = planes.reshape(-1), planes[0, 0].size
+    flat, frame = planes.reshape(-1), int(np.prod(planes.shape[2:]))
     for c in (1, 2) if n < length else ():  # plane c moves down by c * (length - n) frames,
         step = c * (length - n)  # in pieces no longer than that: a piece never overlaps
         for start in range(0, n, step):
@@ -153,15 +153,20 @@ def compress_planes(planes: np.ndarray, codec: FrameCodec = FrameCodec()) -> byt
     return _compressor(codec).compress(np.ascontiguousarray(planes, np.uint8))
 
 
-def encode_frames(frames: np.ndarray, codec: FrameCodec = FrameCodec()) -> bytes:
-    """(n, 144, 144, 3) uint8 -> zstd of the decorrelated, planar, tile-major bytes."""
+def encode_frames(
+    frames: np.ndarray, codec: FrameCodec = FrameCodec(), out: np.ndarray | None = None
+) -> bytes:
+    """(n, 144, 144, 3) uint8 -> zstd of the decorrelated, planar, tile-major bytes. ``out``:
+    a (3, L >= n, 9, 9, 16, 16) buffer to lay them out in (a recycled one: a fresh 16 MB
+    array page-faults on its first fill); its contents are left undefined."""
     if frames.dtype != np.uint8 or frames.shape[1:] != FRAME_SHAPE:
         raise ValueError(
             f"frames must be uint8 (n, {FRAME_SHAPE}), got {frames.dtype} {frames.shape}"
         )
-    planes = np.empty((3, len(frames), *PLANES_SHAPE[1:]), np.uint8)
-    tile_frames(frames, planes)
-    return compress_planes(planes, codec)
+    if out is None:
+        out = np.empty((3, len(frames), *PLANES_SHAPE[1:]), np.uint8)
+    tile_frames(frames, out)
+    return compress_planes(compact_planes(out, len(frames)), codec)
 
 
 def decode_frames(data: bytes, n: int) -> np.ndarray:

@@ -31,6 +31,7 @@ from zoo.data.shards import (
 )
 from zoo.data.tar_writer import ShardAssembler
 from zoo.envs.base import Step, episode_seed
+from zoo.envs.schema import FRAME_SHAPE
 from zoo.envs.constants import ACHIEVEMENT_NAMES
 from zoo.envs.tasks.starts import START_STATES, TaskStartEnv
 from zoo.experts.scripted.schedule import (
@@ -224,8 +225,9 @@ class ShardGenerator:
               ChunkEncoder(max_pending=self.num_envs + 1, pool=self.buffers) as encoder):
             # as many as can be in use: a chunk filling per env, and the queued and coding ones
             in_use = 2 * self.num_envs + 2
-            if self.renderer is None:  # stored frames are laid out in pooled buffers
-                encoder.submit(self.buffers.prefill, (3, cfg.chunk_length, *PLANES_SHAPE[1:]), in_use)
+            if self.renderer is None:  # stored frames go in pooled buffers, laid out in one
+                encoder.submit(self.buffers.prefill, (cfg.chunk_length, *FRAME_SHAPE), in_use)
+                encoder.submit(self.buffers.prefill, (3, cfg.chunk_length, *PLANES_SHAPE[1:]), 1)
             encoder.submit(self.buffers.prefill, (cfg.chunk_length, STATE_ROW_BYTES), in_use)
 
             def start(slot: int) -> bool:

@@ -1,8 +1,8 @@
 """Writing CrafterPlay shards: episodes recorded chunk by chunk, then laid out as tar bytes.
 
 Raw frames never pile up: a chunk of L steps is compressed and appended to the episode's
-spool file as soon as it is full. Stored frames are laid out for the codec as they arrive
-(``tile_frames``, into a buffer the encoder recycles), so the encoder thread only runs zstd.
+spool file as soon as it is full. Stored frames are copied into a buffer the encoder
+recycles; the encoder lays each chunk out for the codec (``tile_frames``) and runs zstd.
 Chunk metadata (``episode_length``, ``last``) and noop runs are only known when the episode
 ends, so samples are assembled then, into one tar fragment per episode; the shard is those
 fragments in episode order plus the tar trailer.
@@ -26,11 +26,9 @@ import numpy as np
 from zoo.data.codec import (
     PLANES_SHAPE,
     FrameCodec,
-    compact_planes,
-    compress_planes,
     encode_arrays,
+    encode_frames,
     encode_json,
-    tile_frames,
 )
 from zoo.data.noop import noop_runs
 from zoo.data.rerender import encode_rendered
@@ -82,12 +80,15 @@ def _spool_chunk(
 ) -> tuple[int, list[tuple[str, int]], dict]:
     """Compress a chunk of n steps and append it to the spool; returns (offset,
     [(member, bytes)], the chunk's extra meta). ``rows``: the steps' packed states. Stored
-    chunks (``state_rng`` None) pass ``frames`` as the buffer of their planes (``tile_frames``'
-    layout, the chunk's frames first), compacted in place. With ``state_rng`` the frames
-    (images) become residuals against re-renders. Buffers go back to ``pool`` once coded."""
+    chunks (``state_rng`` None) are laid out here, off the playing thread, in one numba pass
+    that lets go of the GIL (``tile_frames``); with ``state_rng`` the frames become residuals
+    against re-renders. Buffers go back to ``pool`` once coded."""
     state = _unpack_states(rows, n)
     if state_rng is None:
-        members, meta = {FRAMES: compress_planes(compact_planes(frames, n), codec)}, {}
+        planes = None if pool is None else pool.take((3, len(frames), *PLANES_SHAPE[1:]))
+        members, meta = {FRAMES: encode_frames(frames[:n], codec, planes)}, {}
+        if pool is not None:
+            pool.give(planes)
     else:
         residual, inputs, crc32 = encode_rendered(frames, state, state_rng, codec)
         members, meta = {RESIDUAL: residual, RENDER: inputs}, {"frames_crc32": crc32}
@@ -107,12 +108,12 @@ FragmentSink = Callable[[int, Iterator[bytes], Path], None]
 
 
 class BufferPool:
-    """Buffers of recorders (a chunk's frames, its packed states), given back by the encoder
-    once the chunk is coded and reused by the next chunks (and shards, when a generator keeps
-    its pool). A fresh 16 MB buffer is ~4,000 page faults on its first fill (8-25 ms measured
-    on the 2-core box: a frame's layout took ~100 us instead of ~17). It holds at most the most
-    buffers ever in use at once (at L=256 and 8 envs: 8 filling, up to 9 queued, one coding:
-    ~300 MB, about what recording used before it, but now kept between shards)."""
+    """Buffers of recorders (a chunk's frames, its packed states) and of the encoder (a chunk's
+    codec layout), given back once the chunk is coded and reused by the next chunks (and
+    shards, when a generator keeps its pool). A fresh 16 MB buffer is ~4,000 page faults on
+    its first fill (8-25 ms measured on the 2-core box: a frame's layout took ~100 us instead
+    of ~17). It holds at most the most buffers ever in use at once (at L=256 and 8 envs: 8
+    filling, up to 9 queued, one coding, and the layout buffer: ~300 MB, kept between shards)."""
 
     def __init__(self) -> None:
         self._spare: dict[tuple[int, ...], deque[np.ndarray]] = {}  # deques: thread-safe
@@ -208,9 +209,8 @@ class EpisodeRecorder:
         self.spool = workdir / f"e{episode:07d}.spool"
         self.fragment = workdir / f"e{episode:07d}.tar"
         self.spool.unlink(missing_ok=True)
-        # stored frames go straight into the codec's layout, in a buffer taken from the encoder
-        # at each chunk's first frame; rendered ones stay images (compared with re-renders)
-        self._planes: np.ndarray | None = None
+        # stored frames go into a buffer taken from the encoder's pool at each chunk's first
+        # frame; rendered ones stay in the recorder's own (compared with re-renders)
         self._frames = np.empty((chunk_length, *FRAME_SHAPE), np.uint8) if rendered else None
         self._rows: np.ndarray | None = None  # the chunk's packed states, also from the pool
         self._state: State = {}  # views of the rows as fields
@@ -254,10 +254,10 @@ class EpisodeRecorder:
         if state is None and row is None:
             raise ValueError(f"episode {self.episode}: observe needs the state or its row")
         self._drawn = frame is not None  # rendered recorders may get None: frame = re-render
-        if self._frames is None:
-            if self._planes is None:
-                self._planes = self.encoder.pool.take((3, self.chunk_length, *PLANES_SHAPE[1:]))
-            tile_frames(np.asarray(frame)[None], self._planes, self._fill)
+        if self._rng is None:  # stored: into a pooled buffer, handed to the encoder at the flush
+            if self._frames is None:
+                self._frames = self.encoder.pool.take((self.chunk_length, *FRAME_SHAPE))
+            self._frames[self._fill] = frame
         elif self._drawn:
             self._frames[self._fill] = frame
         if self._rows is None:
@@ -287,9 +287,9 @@ class EpisodeRecorder:
         coded); the next chunk takes new ones at its first step."""
         n, rows, self._rows = self._fill, self._rows, None
         self._last_row = rows[n - 1].copy()
-        if self._frames is None:
-            planes, self._planes = self._planes, None
-            args = (planes, rows, None)
+        if self._rng is None:
+            frames, self._frames = self._frames, None
+            args = (frames, rows, None)
         else:
             args = (self._frames[:n].copy() if self._drawn else None, rows, self._rng[:n].copy())
         job = self.encoder.submit_chunk(

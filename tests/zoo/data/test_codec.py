@@ -74,6 +74,14 @@ def test_layout_and_bytes_match_the_numpy_encoder_on_random_frames(n):
     np.testing.assert_array_equal(decode_frames(coded, n), frames)
 
 
+@pytest.mark.parametrize("n", [0, 5, 40])
+def test_a_recycled_layout_buffer_gives_the_same_bytes(n):
+    # the encoder lays each stored chunk out in a pooled (3, L, ...) buffer holding old bytes
+    frames = _random_frames(n, seed=n)
+    out = np.random.default_rng(1).integers(0, 256, (3, 40, GRID, GRID, TILE, TILE), np.uint8)
+    assert encode_frames(frames, out=out) == encode_frames(frames) == reference_encode(frames)
+
+
 def test_layout_and_bytes_match_the_numpy_encoder_on_a_real_chunk(real_frames):
     frames = real_frames
     planes = np.empty((3, len(frames), GRID, GRID, TILE, TILE), np.uint8)
