@@ -189,8 +189,9 @@ class ShardGenerator:
         self.num_envs = max(1, min(num_envs, config.episodes_per_shard, config.episodes))
         self.agent = build_agent(config, self.num_envs)
         # rendered frames of a state-only expert are drawn once, by the re-render that codes them
-        pixels = config.frames != "rendered" or getattr(self.agent, "needs_pixels", True)
-        self.env = make_env(config.env, self.num_envs, pixels=pixels, max_steps=config.max_steps)
+        self.pixels = config.frames != "rendered" or getattr(self.agent, "needs_pixels", True)
+        self.env = make_env(
+            config.env, self.num_envs, pixels=self.pixels, max_steps=config.max_steps)
         if config.start_states == "tasks":
             self.env = TaskStartEnv(self.env)
         self.scheduler = None  # tells the expert the schedule's instructions
@@ -225,8 +226,9 @@ class ShardGenerator:
               ChunkEncoder(max_pending=self.num_envs + 1, pool=self.buffers) as encoder):
             # as many as can be in use: a chunk filling per env, and the queued and coding ones
             in_use = 2 * self.num_envs + 2
-            if self.renderer is None:  # stored frames go in pooled buffers, laid out in one
+            if self.pixels:  # drawn frames are copied into pooled buffers
                 encoder.submit(self.buffers.prefill, (cfg.chunk_length, *FRAME_SHAPE), in_use)
+            if self.renderer is None:  # and laid out for the codec in one more
                 encoder.submit(self.buffers.prefill, (3, cfg.chunk_length, *PLANES_SHAPE[1:]), 1)
             encoder.submit(self.buffers.prefill, (cfg.chunk_length, STATE_ROW_BYTES), in_use)
 

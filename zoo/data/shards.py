@@ -90,11 +90,12 @@ def _spool_chunk(
         if pool is not None:
             pool.give(planes)
     else:
-        residual, inputs, crc32 = encode_rendered(frames, state, state_rng, codec)
+        drawn = None if frames is None else frames[:n]
+        residual, inputs, crc32 = encode_rendered(drawn, state, state_rng, codec)
         members, meta = {RESIDUAL: residual, RENDER: inputs}, {"frames_crc32": crc32}
     if pool is not None:
         pool.give(rows)
-        if state_rng is None:
+        if frames is not None:
             pool.give(frames)
     members[STATE] = encode_arrays(state, codec)
     with open(path, "ab") as f:
@@ -107,13 +108,21 @@ FragmentSink = Callable[[int, Iterator[bytes], Path], None]
 """``sink(episode, blocks, fragment)``: where an episode's tar blocks go once it ends."""
 
 
+def _anonymous_buffer(shape: tuple[int, ...]) -> np.ndarray:
+    """A uint8 array in its own anonymous map (4 KB pages: no huge-page advice)."""
+    return np.frombuffer(mmap.mmap(-1, max(1, int(np.prod(shape)))), np.uint8)[
+        : int(np.prod(shape))].reshape(shape)
+
+
 class BufferPool:
     """Buffers of recorders (a chunk's frames, its packed states) and of the encoder (a chunk's
     codec layout), given back once the chunk is coded and reused by the next chunks (and
-    shards, when a generator keeps its pool). A fresh 16 MB buffer is ~4,000 page faults on
-    its first fill (8-25 ms measured on the 2-core box: a frame's layout took ~100 us instead
-    of ~17). It holds at most the most buffers ever in use at once (at L=256 and 8 envs: 8
-    filling, up to 9 queued, one coding, and the layout buffer: ~300 MB, kept between shards)."""
+    shards, when a generator keeps its pool). A fresh buffer page-faults on its first fill;
+    buffers are plain anonymous maps, not numpy's (numpy advises huge pages for arrays of
+    4 MB and more, and where the kernel then compacts memory to find them, a 16 MB buffer's
+    first fill took 50-200 ms on the 2-core box, against ~6 ms in 4 KB pages). It holds at
+    most the most buffers ever in use at once (at L=256 and 8 envs: 8 filling, up to 9
+    queued, one coding, and the layout buffer: ~300 MB, kept between shards)."""
 
     def __init__(self) -> None:
         self._spare: dict[tuple[int, ...], deque[np.ndarray]] = {}  # deques: thread-safe
@@ -126,14 +135,14 @@ class BufferPool:
             return self._spare[shape].pop()
         except (KeyError, IndexError):
             self._count(shape)
-            return np.empty(shape, np.uint8)
+            return _anonymous_buffer(shape)
 
     def prefill(self, shape: tuple[int, ...], count: int) -> None:
         """Make buffers of ``shape`` until ``count`` exist, each page touched: run on the
-        encoder thread at a shard's start, so the page faults of a fresh buffer (~90 ms per
-        16 MB here, ~350 us a frame of layout) are not taken by the playing thread."""
+        encoder thread at a shard's start, so the page faults of a fresh buffer are not
+        taken by the playing thread."""
         while self._count(shape, below=count):
-            buf = np.empty(shape, np.uint8)
+            buf = _anonymous_buffer(shape)
             buf.reshape(-1)[:: mmap.PAGESIZE] = 0
             self.give(buf)
 
@@ -147,7 +156,7 @@ class BufferPool:
             return True
 
     def give(self, buf: np.ndarray) -> None:
-        """Take back a buffer no one uses any more (the encoder thread calls it)."""
+        """Take back a buffer no one uses any more (from any thread: deques are thread-safe)."""
         self._spare.setdefault(buf.shape, deque()).append(buf)
 
 
@@ -209,9 +218,8 @@ class EpisodeRecorder:
         self.spool = workdir / f"e{episode:07d}.spool"
         self.fragment = workdir / f"e{episode:07d}.tar"
         self.spool.unlink(missing_ok=True)
-        # stored frames go into a buffer taken from the encoder's pool at each chunk's first
-        # frame; rendered ones stay in the recorder's own (compared with re-renders)
-        self._frames = np.empty((chunk_length, *FRAME_SHAPE), np.uint8) if rendered else None
+        # frames the env drew: in a buffer from the encoder's pool, taken at a chunk's first
+        self._frames: np.ndarray | None = None
         self._rows: np.ndarray | None = None  # the chunk's packed states, also from the pool
         self._state: State = {}  # views of the rows as fields
         self._rng = np.empty((chunk_length, 2), np.uint32) if rendered else None
@@ -254,11 +262,9 @@ class EpisodeRecorder:
         if state is None and row is None:
             raise ValueError(f"episode {self.episode}: observe needs the state or its row")
         self._drawn = frame is not None  # rendered recorders may get None: frame = re-render
-        if self._rng is None:  # stored: into a pooled buffer, handed to the encoder at the flush
+        if self._drawn:  # into a pooled buffer, handed to the encoder at the flush
             if self._frames is None:
                 self._frames = self.encoder.pool.take((self.chunk_length, *FRAME_SHAPE))
-            self._frames[self._fill] = frame
-        elif self._drawn:
             self._frames[self._fill] = frame
         if self._rows is None:
             self._rows = self.encoder.pool.take((self.chunk_length, STATE_ROW_BYTES))
@@ -287,11 +293,11 @@ class EpisodeRecorder:
         coded); the next chunk takes new ones at its first step."""
         n, rows, self._rows = self._fill, self._rows, None
         self._last_row = rows[n - 1].copy()
-        if self._rng is None:
-            frames, self._frames = self._frames, None
-            args = (frames, rows, None)
-        else:
-            args = (self._frames[:n].copy() if self._drawn else None, rows, self._rng[:n].copy())
+        frames, self._frames = self._frames, None
+        if frames is not None and not self._drawn:  # the last frames are re-renders: all are
+            self.encoder.pool.give(frames)
+            frames = None
+        args = (frames, rows, None if self._rng is None else self._rng[:n].copy())
         job = self.encoder.submit_chunk(
             _spool_chunk, self.spool, n, *args, self.codec, self.encoder.pool)
         self._chunks.append(job)
