@@ -166,7 +166,7 @@ class ChunkEncoder(ThreadPoolExecutor):
     ``submit_chunk`` blocks while ``max_pending`` chunks wait, so raw chunks queued for
     compression (16 MB each at L=256) stay bounded when the encoder is slower than the envs.
     Other jobs (fragment writes, shard appends) hold no buffer and never block: taking slots
-    too, their bursts at episodes' ends stalled play (~7% of the stored mode's time).
+    too, their bursts at episodes' ends stalled play (~3% of the stored mode's time).
     Recorders take their buffers from ``pool`` (a new one by default), given back once coded.
     """
 
