@@ -31,8 +31,8 @@ from zoo.data.shards import (
 )
 from zoo.data.tar_writer import ShardAssembler
 from zoo.envs.base import Step, episode_seed
-from zoo.envs.schema import FRAME_SHAPE
 from zoo.envs.constants import ACHIEVEMENT_NAMES
+from zoo.envs.schema import FRAME_SHAPE
 from zoo.envs.tasks.starts import START_STATES, TaskStartEnv
 from zoo.experts.scripted.schedule import (
     InstructionSchedule,

@@ -110,8 +110,8 @@ FragmentSink = Callable[[int, Iterator[bytes], Path], None]
 
 def _anonymous_buffer(shape: tuple[int, ...]) -> np.ndarray:
     """A uint8 array in its own anonymous map (4 KB pages: no huge-page advice)."""
-    return np.frombuffer(mmap.mmap(-1, max(1, int(np.prod(shape)))), np.uint8)[
-        : int(np.prod(shape))].reshape(shape)
+    size = int(np.prod(shape))
+    return np.frombuffer(mmap.mmap(-1, max(1, size)), np.uint8)[:size].reshape(shape)
 
 
 class BufferPool:
