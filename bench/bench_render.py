@@ -214,6 +214,7 @@ def part_data(args) -> dict:
                 row[f"{mode}_generate_fps"] = float(np.median(rounds[mode]))
                 row[f"{mode}_generate_over_raw"] = float(np.median(ratios))
                 row[f"{mode}_generate_over_raw_range"] = [float(ratios.min()), float(ratios.max())]
+                row[f"{mode}_generate_over_raw_rounds"] = [round(float(r), 3) for r in ratios]
                 row[f"{mode}_frame_bytes_per_frame"] = dataset_info(
                     roots[renderer, mode])["frame_bytes_per_frame"]
             pixel_root = Path(tmp) / f"{renderer}-pixels"
