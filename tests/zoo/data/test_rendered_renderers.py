@@ -2,7 +2,8 @@
 
 Default suite: chunks of played Craftax states (frames drawn by Craftax's JAX renderer, as
 the env drew them before the numba renderer) are coded with one renderer's re-renders and
-decoded with the other's. Slow suite: whole datasets, one written as this project wrote
+decoded with the other's; a pixel agent's tiny dataset decodes to the same frames written
+in either mode. Slow suite: whole datasets, one written as this project wrote
 rendered shards before the numba renderer (``ZOO_RENDERER=jax``: the env draws its frames
 inside its jitted step, residuals are taken against JAX re-renders), one written with numba
 throughout, each decoded with both renderers: every decode passes the chunk's CRC32 of the
