@@ -109,8 +109,8 @@ class ShardAssembler:
 
     def add_blocks(self, episode: int, blocks: Iterator[bytes], fragment: Path) -> None:
         """Episode ``episode``'s fragment as tar blocks: written straight into the shard when
-        every episode before it is in (no fragment file to write, read back and delete:
-        half the tail a shard waits for after play), else to ``fragment`` until its turn."""
+        every episode before it is in (no fragment file to write, read back and delete), else
+        to ``fragment`` until its turn."""
         if self._order and self._order[0] == episode:
             self._order.popleft()
             for block in blocks:
