@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import torch
 
+from lit_models.init_weights import starting_weights
 from lit_models.sequence_bc import IGNORE_ACTION, SequenceBC, UpdateEvery
 from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
@@ -49,6 +50,7 @@ class CSteve1(SequenceBC):
         min_lr_ratio: float = 0.0,
         label_smoothing: float = 0.0,
         activation_checkpointing: bool = True,
+        init_weights: str | None = None,
         backbone_config: dict | None = None,
     ) -> None:
         """Args:
@@ -77,6 +79,9 @@ class CSteve1(SequenceBC):
         min_lr_ratio: final LR as a fraction of ``lr``.
         label_smoothing: cross-entropy label smoothing.
         activation_checkpointing: with ``update_every: batch``, recompute each window in backward.
+        init_weights: a C-Steve-1 ``.ckpt`` or ``zoo export`` folder of the same architecture
+            whose weights start this run with a fresh optimizer and schedule (a DAgger round
+            fine-tunes the last round's); a ``--ckpt_path`` resume keeps its own weights.
         backbone_config: the backbone's C-VPT config; filled in from ``backbone`` on first
             build (leave it unset).
         """
@@ -89,6 +94,25 @@ class CSteve1(SequenceBC):
                 "`zoo export` folder to start C-Steve-1 from"
             )
         self.setup_metrics(NUM_ACTIONS)
+        self._weights_ready = init_weights is None
+
+    def on_fit_start(self) -> None:
+        data_dim = getattr(self.trainer.datamodule, "goal_dim", None)
+        if data_dim is not None and data_dim != self.hparams.goal_dim:
+            raise ValueError(
+                f"model.init_args.goal_dim={self.hparams.goal_dim} but the data's goal embeddings "
+                f"(data.init_args.embeddings) have {data_dim} dimensions: set goal_dim={data_dim}"
+            )
+        # after configure_model and a --ckpt_path restore (which sets _weights_ready), before
+        # the sanity check; load_from_checkpoint never reads the init_weights file
+        if not self._weights_ready:
+            self.model.load_state_dict(
+                starting_weights(self.hparams.init_weights, "csteve1", self.model, "C-Steve-1")
+            )
+            self._weights_ready = True
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        self._weights_ready = True
 
     def configure_model(self) -> None:
         """Build the network (Lightning calls this before training and before loading a
@@ -117,14 +141,6 @@ class CSteve1(SequenceBC):
             "val/loss_nogoal": self._loss(self(frames, first, torch.zeros_like(goal)), actions),
         }
         self.log_dict(losses, batch_size=actions.shape[0], sync_dist=True)
-
-    def on_fit_start(self) -> None:
-        data_dim = getattr(self.trainer.datamodule, "goal_dim", None)
-        if data_dim is not None and data_dim != self.hparams.goal_dim:
-            raise ValueError(
-                f"model.init_args.goal_dim={self.hparams.goal_dim} but the data's goal embeddings "
-                f"(data.init_args.embeddings) have {data_dim} dimensions: set goal_dim={data_dim}"
-            )
 
 
 __all__ = ["CSteve1"]

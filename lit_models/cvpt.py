@@ -7,37 +7,10 @@ with C-Steve-1; this module builds the network from a preset and optional starti
 
 from __future__ import annotations
 
-import dataclasses
-from pathlib import Path
-
-import torch
-
+from lit_models.init_weights import starting_weights
 from lit_models.sequence_bc import SequenceBC, UpdateEvery
 from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
-from zoo.weights import load_model
-from zoo.weights.checkpoint_io import CheckpointError
-
-
-def _network_weights(path: str, config: CVPTConfig) -> dict[str, torch.Tensor]:
-    """State dict of the C-VPT network at ``path``, refused unless its config is ``config``."""
-    if not Path(path).exists():
-        raise FileNotFoundError(
-            f"model.init_weights={path}: no such checkpoint or export folder (resuming or testing"
-            " a run that started from it? Its weights are in --ckpt_path: add"
-            " --model.init_args.init_weights=null)"
-        )
-    try:
-        source = load_model(path, "cvpt")
-    except CheckpointError as err:
-        raise CheckpointError(f"model.init_weights: {err}") from None
-    if source.config != config:
-        theirs, ours = dataclasses.asdict(source.config), dataclasses.asdict(config)
-        diff = {k: (theirs[k], ours[k]) for k in ours if theirs.get(k) != ours[k]}
-        raise CheckpointError(
-            f"model.init_weights={path} holds a different C-VPT: (its value, this model's) {diff}"
-        )
-    return source.state_dict()
 
 
 class CVPT(SequenceBC):
@@ -129,7 +102,9 @@ class CVPT(SequenceBC):
     def setup(self, stage: str) -> None:
         # A --ckpt_path resume restores its own weights after this (on_load_checkpoint).
         if not self._weights_ready:
-            self.model.load_state_dict(_network_weights(self.hparams.init_weights, self.config))
+            self.model.load_state_dict(
+                starting_weights(self.hparams.init_weights, "cvpt", self.model, "C-VPT")
+            )
             self._weights_ready = True
 
     def on_load_checkpoint(self, checkpoint: dict) -> None:

@@ -124,3 +124,39 @@ def test_missing_backbone_is_a_clear_error(tmp_path: Path) -> None:
     module = CSteve1(backbone=str(tmp_path / "nowhere.ckpt"))  # a config check reads no file
     with pytest.raises(FileNotFoundError, match="nowhere.ckpt"):
         module.configure_model()
+
+
+def test_init_weights_starts_a_new_run_from_a_finished_one(tmp_path: Path) -> None:
+    """A DAgger round: the last round's network, a fresh optimizer; the new run reloads
+    without the file it started from, and another architecture is refused by name."""
+    backbone = _backbone_export(tmp_path)
+    settings = dict(backbone=str(backbone), goal_dim=GOAL_DIM, lora_rank=2, tbptt_len=4,
+                    activation_checkpointing=False)
+    first = CSteve1(**settings, lr=3e-2, cosine_steps=100)
+    batch = _goal_batch()
+    trainer = _trainer(20, tmp_path)
+    trainer.fit(first, train_dataloaders=DataLoader([batch] * 20, batch_size=None))
+    path = tmp_path / "round0.ckpt"
+    trainer.save_checkpoint(path)
+
+    follow_up = CSteve1(**settings, lr=1e-9, cosine_steps=100, init_weights=str(path))
+    follow_up.configure_model()
+    assert _loss(follow_up, batch, batch["goal"]) > _loss(first.eval(), batch, batch["goal"]) + 0.1
+    again = _trainer(1, tmp_path)
+    again.fit(follow_up, train_dataloaders=DataLoader([batch], batch_size=None))
+    follow_up.eval()
+    # one step at lr 1e-9: the network is round 0's
+    assert _loss(follow_up, batch, batch["goal"]) == pytest.approx(
+        _loss(first, batch, batch["goal"]), abs=1e-4)
+    path.rename(tmp_path / "gone.ckpt")
+    saved = tmp_path / "round1.ckpt"
+    again.save_checkpoint(saved)
+    reloaded = CSteve1.load_from_checkpoint(saved).eval()
+    with torch.no_grad():
+        torch.testing.assert_close(reloaded(batch["frames"], batch["first"], batch["goal"]),
+                                   follow_up(batch["frames"], batch["first"], batch["goal"]))
+
+    wider = CSteve1(**{**settings, "lora_rank": 4}, cosine_steps=10,
+                    init_weights=str(tmp_path / "gone.ckpt"))
+    with pytest.raises(Exception, match="holds a different C-Steve-1.*lora_rank"):
+        _trainer(1, tmp_path).fit(wider, train_dataloaders=DataLoader([batch], batch_size=None))

@@ -126,7 +126,8 @@ def make_agent(
 def dataset_agent(config, num_envs: int) -> Agent:
     """The agent that plays the episodes of a CrafterPlay dataset
     (``zoo.data.generate.GenerationConfig``): its expert, or with ``dagger`` settings the
-    learner/expert mixture. What ``zoo data generate`` and ``zoo data dagger`` pass to
+    learner/expert mixture (a C-Steve-1 learner reads its instructions through the settings'
+    ``cclip`` and ``prior``). What ``zoo data generate`` and ``zoo data dagger`` pass to
     ``zoo.data.generate.generate`` as ``build_agent``."""
     expert = make_agent(config.expert, num_envs, config.checkpoint,
                         expert_options=config.expert_options)
@@ -135,8 +136,14 @@ def dataset_agent(config, num_envs: int) -> Agent:
         return expert
     from zoo.agents.dagger import DaggerMixture
 
-    # the C-VPT learner: a .ckpt or an export folder
-    learner = make_agent("cvpt", num_envs, dagger.learner, temperature=dagger.learner_temperature)
+    # the learner: a C-VPT, or a C-Steve-1 (told the schedule's instructions), .ckpt or export
+    kind = checkpoint_kind(dagger.learner)
+    if kind == "csteve1":
+        learner = make_agent("csteve1", num_envs, dagger.learner, dagger.learner_temperature,
+                             dagger.cclip, dagger.prior, dagger.cfg_scale)
+    else:
+        learner = make_agent("cvpt", num_envs, dagger.learner,
+                             temperature=dagger.learner_temperature)
     return DaggerMixture(learner, expert, num_envs, dagger.beta, dagger.mix)
 
 

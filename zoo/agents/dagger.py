@@ -10,6 +10,10 @@ for resting, shelter and refilling). Every piece is either recomputed from the c
 at each step or checked against it before use (a guarded plant that is not there is
 forgotten), and ``act`` is called at every step of the executed trajectory, so the memory
 follows what was actually played, not what the expert would have played.
+
+With an instruction schedule (goal-directed DAgger) the mixture is what the schedule tells:
+the expert pursues the instruction and the learner, when it takes instructions (C-Steve-1), is
+told the same one, so the labels show how to follow it from where the learner went astray.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ class DaggerMixture:
     After ``act``: ``labels`` (the expert's actions), ``learner_actions``, ``expert_drove``.
 
     Args:
-        learner: the policy being improved (C-VPT).
+        learner: the policy being improved (C-VPT, or C-Steve-1 told the expert's instruction).
         expert: the labeller (scripted expert).
         num_envs: envs both agents act for.
         beta: probability that the expert acts.
@@ -56,6 +60,23 @@ class DaggerMixture:
         self.labels = np.zeros(n, np.int32)
         self.learner_actions = np.zeros(n, np.int32)
         self.expert_drove = np.zeros(n, bool)
+
+    @property
+    def num_envs(self) -> int:
+        return self._num_envs
+
+    @property
+    def config(self):
+        """The expert's ``ExpertConfig`` (an instruction schedule reads its rest thresholds)."""
+        return self.expert.config
+
+    def instruct(self, instructions: list[str | None], mask: np.ndarray | None = None) -> None:
+        """Tell the expert, and a learner that takes instructions, env i's ``instructions[i]``
+        where ``mask[i]`` (None: no instruction; the expert plays normally, C-Steve-1 with no
+        goal)."""
+        self.expert.instruct(instructions, mask)
+        if hasattr(self.learner, "instruct"):
+            self.learner.instruct(instructions, mask)
 
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> None:
         self.learner.reset(seeds, mask)

@@ -72,14 +72,17 @@ def register(subparsers) -> None:
 
     dagger = data_sub.add_parser(
         "dagger",
-        help="DAgger rollouts: a C-VPT plays, the scripted expert labels every state",
+        help="DAgger rollouts: a C-VPT or C-Steve-1 plays, the scripted expert labels every state",
         description="Write CrafterPlay shards whose actions are the expert's labels of the "
         "states the learner reached (manifest: config.dagger with round, learner sha256, beta). "
         "Resumable and deterministic like `zoo data generate`; train on them together with "
-        "the expert data through the datamodule's `sources`. See docs/dagger.md.",
+        "the expert data through the datamodule's `sources`. With --instructions the expert "
+        "follows a schedule and a C-Steve-1 learner is told the same instruction (goal-directed "
+        "DAgger). See docs/dagger.md.",
     )
     dagger.add_argument("--checkpoint", required=True,
-                        help="the learner: a C-VPT .ckpt from zoo fit or a zoo export folder")
+                        help="the learner: a C-VPT or C-Steve-1 .ckpt from zoo fit or a zoo "
+                        "export folder")
     dagger.add_argument("--expert", choices=("scripted",), default="scripted",
                         help="the labeller (it must read the state)")
     dagger.add_argument("--beta", type=float, default=0.0,
@@ -89,6 +92,15 @@ def register(subparsers) -> None:
     dagger.add_argument("--round", type=int, default=1, help="DAgger round, for the manifest")
     dagger.add_argument("--temperature", type=float, default=1.0,
                         help="the learner's sampling temperature")
+    dagger.add_argument("--instructions", metavar="captions|subgoals|FILE",
+                        help="goal-directed DAgger: the scripted expert follows this schedule "
+                        "(as in `generate`) and a C-Steve-1 learner is told the same instruction")
+    dagger.add_argument("--instruction-timeout", type=positive_int, default=300, metavar="N",
+                        help="actions spent on an instruction before the next is drawn")
+    dagger.add_argument("--cclip", help="a C-Steve-1 learner's C-CLIP checkpoint")
+    dagger.add_argument("--prior", help="a C-Steve-1 learner's CVAE prior checkpoint")
+    dagger.add_argument("--cfg-scale", type=float,
+                        help="a C-Steve-1 learner's guidance scale (default: its export's)")
     _add_play_args(dagger)
     dagger.set_defaults(handler=_dagger, _parser=dagger)
 
@@ -167,27 +179,63 @@ def _generate(args) -> int:
     if args.instructions is not None and args.expert != "scripted":
         args._parser.error(f"--instructions needs --expert scripted, not {args.expert}")
     _check_frames(args)
-    instructions = None
-    if args.instructions is not None:
-        from zoo.agents.instructions import instruction_schedule
-
-        try:
-            instructions = instruction_schedule(args.instructions, args.instruction_timeout)
-        except ValueError as err:
-            args._parser.error(f"--instructions: {err}")
     config = GenerationConfig(
         expert=args.expert, checkpoint=checkpoint, episodes=args.episodes, seed=args.seed,
         env=args.env, episodes_per_shard=args.episodes_per_shard,
         chunk_length=args.chunk_length, max_steps=args.max_steps, frames=args.frames,
-        expert_options=dict(args.expert_option) or None, instructions=instructions,
+        expert_options=dict(args.expert_option) or None, instructions=_schedule(args),
         start_states=args.start_states,
     )
     return _run_generation(config, args, "generate")
 
 
+def _schedule(args):
+    """``--instructions``' schedule (None without it); a bad one is a usage error."""
+    if args.instructions is None:
+        return None
+    from zoo.agents.instructions import instruction_schedule
+
+    try:
+        return instruction_schedule(args.instructions, args.instruction_timeout)
+    except ValueError as err:
+        args._parser.error(f"--instructions: {err}")
+
+
+def _learner_goal_models(args, kind: str) -> dict:
+    """The C-Steve-1 learner's goal models and guidance for ``DaggerSettings`` (checked: a
+    C-Steve-1 needs both, a C-VPT takes none)."""
+    from zoo.weights.export import checkpoint_sha256
+
+    given = [flag for flag, value in (("--cclip", args.cclip), ("--prior", args.prior),
+                                      ("--cfg-scale", args.cfg_scale)) if value is not None]
+    if kind != "csteve1":
+        if given:
+            args._parser.error(f"{', '.join(given)} apply to a C-Steve-1 learner; "
+                               f"{args.checkpoint} is a C-VPT")
+        return {}
+    missing = [flag for flag, value in (("--cclip", args.cclip), ("--prior", args.prior))
+               if value is None]
+    if missing:
+        args._parser.error(f"a C-Steve-1 learner reads its instructions through "
+                           f"{' and '.join(missing)} (its C-CLIP and CVAE prior checkpoints)")
+    if args.instructions is None:
+        args._parser.error("a C-Steve-1 learner needs --instructions: the schedule it is told")
+    if args.cfg_scale is not None and args.cfg_scale < 0:
+        args._parser.error(f"--cfg-scale must be >= 0, got {args.cfg_scale}")
+    models = {}
+    for name in ("cclip", "prior"):
+        path = Path(getattr(args, name))
+        if not path.exists():
+            args._parser.error(f"--{name} {path} does not exist")
+        models[name] = str(path.resolve())
+        models[f"{name}_sha256"] = checkpoint_sha256(path)
+    return {**models, "cfg_scale": args.cfg_scale}
+
+
 def _dagger(args) -> int:
     import os
 
+    from zoo.agents import checkpoint_kind
     from zoo.data.generate import GenerationConfig
     from zoo.data.shard_generator import DaggerSettings
     from zoo.weights.export import checkpoint_sha256
@@ -200,13 +248,22 @@ def _dagger(args) -> int:
     if args.temperature <= 0:
         args._parser.error(f"--temperature must be > 0, got {args.temperature}")
     _check_frames(args)
+    try:
+        kind = checkpoint_kind(learner)
+    except ValueError as err:
+        args._parser.error(f"--checkpoint: {err}")
+    if kind not in ("cvpt", "csteve1"):
+        args._parser.error(f"--checkpoint {learner} holds a {kind} agent; the learner must be "
+                           "a C-VPT or C-Steve-1")
+    goal_models = _learner_goal_models(args, kind)
     config = GenerationConfig(
         expert=args.expert, episodes=args.episodes, seed=args.seed, env=args.env,
         episodes_per_shard=args.episodes_per_shard, chunk_length=args.chunk_length,
-        max_steps=args.max_steps, frames=args.frames,
+        max_steps=args.max_steps, frames=args.frames, instructions=_schedule(args),
         dagger=DaggerSettings(
             learner=str(learner.resolve()), learner_sha256=checkpoint_sha256(learner),
             learner_temperature=args.temperature, beta=args.beta, mix=args.mix, round=args.round,
+            **goal_models,
         ),
     )
     if args.workers > 1:  # each spawned worker runs the learner: share the cores, not oversubscribe

@@ -53,13 +53,16 @@ class DaggerSettings:
     every state it reaches. Stored nested in the manifest's ``config`` as ``dagger``.
 
     Args:
-        learner: the C-VPT (.ckpt or export folder) that plays.
+        learner: the C-VPT or C-Steve-1 (.ckpt or export folder) that plays.
         learner_sha256: the learner's fingerprint (``zoo.weights.export.checkpoint_sha256``),
             so other weights at the same path make another dataset.
         learner_temperature: the learner's sampling temperature.
         beta: probability that the expert acts instead of the learner.
         mix: "episode" or "step", what one beta draw decides.
         round: the round number, for the record.
+        cclip, prior: a C-Steve-1 learner's goal models (its instructions' text -> goals),
+            with their sha256s (``cclip_sha256``, ``prior_sha256``); None for a C-VPT.
+        cfg_scale: a C-Steve-1 learner's guidance scale (None: what its export records).
     """
 
     learner: str
@@ -68,6 +71,11 @@ class DaggerSettings:
     beta: float
     mix: str
     round: int | None = None
+    cclip: str | None = None
+    cclip_sha256: str | None = None
+    prior: str | None = None
+    prior_sha256: str | None = None
+    cfg_scale: float | None = None
 
     def __post_init__(self) -> None:
         # None can come from an old manifest's flat fields (``zoo.data.manifest.nest_dagger``);
@@ -105,7 +113,7 @@ class GenerationConfig:
             A dict (as read back from a manifest) becomes ``DaggerSettings``.
         instructions: the schedule of captions the scripted expert is told one after another
             (``zoo.experts.scripted.schedule``), each step recording the one it pursued; None:
-            normal play. A dict (as read back from a manifest) becomes ``InstructionSchedule``.
+            normal play. With ``dagger`` a C-Steve-1 learner is told the same instructions. A dict (as read back from a manifest) becomes ``InstructionSchedule``.
         start_states: None (or "default"): the game's own start; "tasks": each episode starts
             with one of the task suites' starting inventories (``zoo.envs.tasks.starts``).
     """
@@ -147,11 +155,10 @@ class GenerationConfig:
             object.__setattr__(self, "dagger", DaggerSettings(**self.dagger))
         if isinstance(self.instructions, dict):
             object.__setattr__(self, "instructions", InstructionSchedule(**self.instructions))
-        if self.instructions is not None and (self.expert != "scripted" or self.dagger is not None):
+        if self.instructions is not None and self.expert != "scripted":
             raise ValueError(
-                "an instruction schedule is followed by the scripted expert playing alone "
-                f"(expert='scripted', no dagger), got expert={self.expert!r}"
-                + (" with dagger settings" if self.dagger is not None else "")
+                "an instruction schedule is followed by the scripted expert (alone, or labelling"
+                f" a learner told the same instructions), got expert={self.expert!r}"
             )
         if self.start_states == "default":
             object.__setattr__(self, "start_states", None)  # one spelling of the game's start

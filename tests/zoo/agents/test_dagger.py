@@ -17,7 +17,10 @@ from zoo.data.reader import iter_episodes
 from zoo.envs.base import Step
 from zoo.envs.constants import NUM_ACTIONS
 from zoo.experts.scripted import ScriptedExpert
+from zoo.models.cclip import CCLIPConfig, CCLIPModel
 from zoo.models.cvpt import CVPTConfig, CVPTModel
+from zoo.models.prior import CVAEPrior, PriorConfig
+from zoo.models.steve import SteveConfig, SteveModel
 from zoo.weights.export import checkpoint_sha256, save_exported
 
 SIZES = dict(d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(4, 8, 8),
@@ -181,3 +184,98 @@ def test_dagger_shard_range_outside_the_dataset_is_named(learner, tmp_path, caps
         main(["data", "dagger", "--checkpoint", str(learner), "--episodes", "2", "--seed", "0",
               "--episodes-per-shard", "1", "--shards", "5:6", "--out", str(tmp_path / "o")])
     assert "holds none of the dataset's shards 0:2" in capsys.readouterr().err
+
+
+# --- goal-directed DAgger: a C-Steve-1 learner told the expert's instruction ------------------
+
+
+class InstructableConstant(ConstantAgent):
+    """A stand-in for an instructable learner or the expert: remembers what it was told."""
+
+    config = "expert config"
+
+    def __init__(self, action: int, num_envs: int) -> None:
+        super().__init__(action, num_envs)
+        self.told: list[str | None] = [None] * num_envs
+
+    def instruct(self, instructions, mask=None) -> None:
+        for i in range(self.num_envs) if mask is None else np.flatnonzero(mask):
+            self.told[i] = instructions[i]
+
+
+def test_mixture_tells_an_instructable_learner_what_the_expert_is_told() -> None:
+    learner, expert = InstructableConstant(3, 2), InstructableConstant(5, 2)
+    mixture = DaggerMixture(learner, expert, 2, 0.0)
+    mixture.instruct(["obtain wood", "obtain drink"])
+    mixture.instruct(["obtain sapling", None], np.array([False, True]))
+    assert learner.told == expert.told == ["obtain wood", None]
+    assert mixture.config == "expert config" and mixture.num_envs == 2  # what a schedule reads
+    plain = DaggerMixture(ConstantAgent(3, 2), expert, 2, 0.0)  # a C-VPT takes no instructions
+    plain.instruct(["obtain drink", "obtain drink"])
+    assert expert.told == ["obtain drink", "obtain drink"]
+
+
+@pytest.fixture(scope="module")
+def steve_learner(tmp_path_factory) -> dict[str, Path]:
+    """A tiny random C-Steve-1 export with the C-CLIP and prior exports it reads text with."""
+    root = tmp_path_factory.mktemp("steve_learner")
+    torch.manual_seed(0)
+    backbone = CVPTModel(CVPTConfig.from_name("tiny", NUM_ACTIONS, **SIZES))
+    steve = SteveModel(backbone, SteveConfig(goal_dim=64, lora_rank=2, conditioning="film"))
+    with torch.no_grad():
+        for param in steve.trainable_parameters().values():
+            param.normal_(0, 0.5)  # a goal that moves the actions
+    return {
+        "checkpoint": save_exported(steve.eval(), root / "csteve1", inference={"cfg_scale": 1.0}),
+        "cclip": save_exported(CCLIPModel(CCLIPConfig.from_name("smoke")).eval(), root / "cclip"),
+        "prior": save_exported(
+            CVAEPrior(PriorConfig(embed_dim=64, hidden=32, latent_dim=8)).eval(), root / "prior"),
+    }
+
+
+def _told_argv(paths: dict[str, Path], out: Path, num_envs: int = 2) -> list[str]:
+    return ["data", "dagger", "--checkpoint", str(paths["checkpoint"]), "--cclip",
+            str(paths["cclip"]), "--prior", str(paths["prior"]), "--instructions", "subgoals",
+            "--instruction-timeout", "20", "--beta", "0", *PLAY, "--num-envs", str(num_envs),
+            "--out", str(out)]
+
+
+def test_a_steve_learner_is_told_the_schedule_and_its_rollouts_are_reproducible(
+    steve_learner, tmp_path
+) -> None:
+    out = tmp_path / "told"
+    assert main(_told_argv(steve_learner, out)) == 0
+    config = json.loads((out / "manifest.json").read_text())["config"]
+    dagger = config["dagger"]
+    assert dagger["cclip_sha256"] == checkpoint_sha256(steve_learner["cclip"])
+    assert dagger["prior_sha256"] == checkpoint_sha256(steve_learner["prior"])
+    assert dagger["cfg_scale"] is None and config["instructions"]["timeout"] == 20
+    commanded = np.concatenate([
+        e["instruction"][:-1] for e in iter_episodes(sorted(str(p) for p in out.glob("*.tar")))
+    ])
+    # every action records the caption it pursued; 60 steps at timeout 20: several per episode
+    assert set(commanded.tolist()) <= set(config["instructions"]["caption_ids"]) | {-1}
+    assert len(set(commanded.tolist()) - {-1}) >= 2
+    # the learner's goals are drawn from the episode seeds and texts alone: --num-envs changes
+    # nothing
+    again = tmp_path / "again"
+    assert main(_told_argv(steve_learner, again, num_envs=1)) == 0
+    assert _shas(again) == _shas(out)
+
+
+def test_goal_directed_dagger_cli_names_what_is_missing(steve_learner, learner, tmp_path, capsys) -> None:
+    no_prior = _told_argv(steve_learner, tmp_path / "a")
+    i = no_prior.index("--prior")
+    del no_prior[i : i + 2]
+    with pytest.raises(SystemExit):
+        main(no_prior)
+    assert "a C-Steve-1 learner reads its instructions through --prior" in capsys.readouterr().err
+    untold = _told_argv(steve_learner, tmp_path / "b")
+    i = untold.index("--instructions")
+    del untold[i : i + 2]
+    with pytest.raises(SystemExit):
+        main(untold)
+    assert "a C-Steve-1 learner needs --instructions" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main([*_dagger_argv(learner, tmp_path / "c"), "--cclip", str(steve_learner["cclip"])])
+    assert "--cclip apply to a C-Steve-1 learner" in capsys.readouterr().err
