@@ -9,7 +9,7 @@ import json
 import sys
 from pathlib import Path
 
-from zoo.agents import AGENT_NAMES
+from zoo.agents import AGENT_NAMES, checkpoint_kind
 from zoo.argtypes import existing_dir, out_dir, positive_int, shard_range
 from zoo.envs import ENV_NAMES
 from zoo.envs.tasks.starts import START_STATES
@@ -235,7 +235,6 @@ def _learner_goal_models(args, kind: str) -> dict:
 def _dagger(args) -> int:
     import os
 
-    from zoo.agents import checkpoint_kind
     from zoo.data.generate import GenerationConfig
     from zoo.data.shard_generator import DaggerSettings
     from zoo.weights.export import checkpoint_sha256
