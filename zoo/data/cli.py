@@ -60,7 +60,8 @@ def register(subparsers) -> None:
     gen.add_argument("--instructions", metavar="captions|subgoals|FILE",
                      help="goal-directed play: tell the scripted expert one caption after another, "
                      "drawn from captions (all it follows), subgoals (the task suites' sub-goals) "
-                     "or FILE (one caption per line); every step records its caption id")
+                     "or FILE (one caption per line, or 'caption | weight' to draw it more "
+                     "often); every step records its caption id")
     gen.add_argument("--instruction-timeout", type=positive_int, default=300, metavar="N",
                      help="actions spent on an instruction before the next is drawn "
                      "(with --instructions)")

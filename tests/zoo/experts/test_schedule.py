@@ -80,6 +80,29 @@ def test_a_caption_file_names_the_captions(tmp_path) -> None:
     assert instruction_schedule(str(path), 9).caption_ids == (21, 13)
 
 
+def test_a_caption_file_can_weight_its_captions(tmp_path) -> None:
+    path = tmp_path / "drink.txt"
+    path.write_text("obtain wood\nobtain drink | 4  # the learner's weak spot\nobtain sapling\n")
+    schedule = instruction_schedule(str(path), 9)
+    assert schedule.captions == (WOOD, "obtain drink", "obtain sapling")
+    assert schedule.weights == (1.0, 4.0, 1.0)
+    rng = np.random.default_rng(0)
+    firsts = np.bincount([schedule.draw(rng) for _ in range(6000)], minlength=3) / 6000
+    np.testing.assert_allclose(firsts, [1 / 6, 4 / 6, 1 / 6], atol=0.02)
+    after_drink = [schedule.draw(rng, exclude=1) for _ in range(2000)]
+    assert 1 not in after_drink and abs(np.mean(np.equal(after_drink, 0)) - 0.5) < 0.04
+    after_wood = np.bincount([schedule.draw(rng, exclude=0) for _ in range(5000)], minlength=3)
+    assert after_wood[0] == 0 and abs(after_wood[1] / 5000 - 0.8) < 0.02
+    # without weights a file is uniform, drawn as before weights existed
+    path.write_text("obtain wood\nobtain drink | 1\n")
+    assert instruction_schedule(str(path), 9).weights is None
+    path.write_text("obtain wood | lots\n")
+    with pytest.raises(ValueError, match=r"drink.txt:1: weight 'lots' is not a number"):
+        instruction_schedule(str(path), 9)
+    with pytest.raises(ValueError, match="one weight > 0 per caption"):
+        InstructionSchedule((WOOD, TABLE), (0, 13), 5, (1.0, 0.0))
+
+
 @pytest.mark.parametrize("captions, ids, timeout, message", [
     (("dance",), (0,), 5, r"cannot follow \['dance'\]"),
     ((WOOD, WOOD), (0, 0), 5, "appear twice"),

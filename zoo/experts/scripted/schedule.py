@@ -4,7 +4,8 @@
 hindsight relabelling of normal play cannot give (there the order of the goals is the expert's
 fixed tech tree, predictable from the time step alone). Each env pursues a caption drawn from the
 schedule until its event happens (completed) or ``timeout`` actions have gone by (timed out),
-then draws the next one, never the same twice in a row so every switch shows in the record.
+then draws the next one (uniformly, or by the schedule's weights), never the same twice in a
+row so every switch shows in the record.
 The draws come from the episode's seed alone, so the data stays a function of (seed, episode).
 
 Told something, the expert only stays alive besides (no sleep, no night shelter): it would die
@@ -61,17 +62,35 @@ _STREAM = 0x1257  # the schedule's random stream, apart from the planner's (seed
 
 
 def schedule_captions(spec: str) -> tuple[str, ...]:
-    """The captions of ``spec``: a name of ``CAPTION_SETS`` or a text file with one caption per
-    line (blank lines and ``#`` comments skipped)."""
+    """The captions of ``spec`` (``read_schedule``), without their weights."""
+    return read_schedule(spec)[0]
+
+
+def read_schedule(spec: str) -> tuple[tuple[str, ...], tuple[float, ...] | None]:
+    """The captions of ``spec`` and their draw weights: a name of ``CAPTION_SETS`` (uniform) or
+    a text file with one caption per line, optionally ``caption | weight`` (blank lines and
+    ``#`` comments skipped; weights None when no line gives one: uniform draws)."""
     if spec in CAPTION_SETS:
-        return CAPTION_SETS[spec]
+        return CAPTION_SETS[spec], None
     path = Path(spec)
     if not path.is_file():
         raise ValueError(
             f"instructions {spec!r}: expected {' or '.join(CAPTION_SETS)} or a file of captions"
         )
-    lines = (line.split("#", 1)[0].strip() for line in path.read_text().splitlines())
-    return tuple(line for line in lines if line)
+    captions, weights = [], []
+    for number, line in enumerate(path.read_text().splitlines(), 1):
+        text, _, weight = line.split("#", 1)[0].partition("|")
+        if not text.strip():
+            continue
+        captions.append(text.strip())
+        try:
+            weights.append(float(weight) if weight.strip() else 1.0)
+        except ValueError:
+            raise ValueError(
+                f"{path}:{number}: weight {weight.strip()!r} is not a number "
+                "(expected 'caption | weight')"
+            ) from None
+    return tuple(captions), None if set(weights) <= {1.0} else tuple(weights)
 
 
 @dataclass(frozen=True)
@@ -84,11 +103,14 @@ class InstructionSchedule:
         caption_ids: their CrafterCaption ids (zoo/captions/captions.yaml), which the shards
             record per step.
         timeout: actions spent on an instruction before the next one is drawn.
+        weights: each caption's draw weight (None: uniform draws, and older manifests compare
+            equal); a DAgger round can ask more often for what its learner gets wrong.
     """
 
     captions: tuple[str, ...]
     caption_ids: tuple[int, ...]
     timeout: int = 300
+    weights: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         # tuples, also when read back from a manifest's JSON lists
@@ -110,6 +132,28 @@ class InstructionSchedule:
             )
         if self.timeout < 1:
             raise ValueError(f"the instruction timeout must be >= 1 action, got {self.timeout}")
+        if self.weights is not None:
+            object.__setattr__(self, "weights", tuple(float(w) for w in self.weights))
+            if len(self.weights) != len(self.captions) or min(self.weights) <= 0:
+                raise ValueError(
+                    f"need one weight > 0 per caption, got {list(self.weights)} for "
+                    f"{len(self.captions)} captions"
+                )
+
+    def draw(self, rng: np.random.Generator, exclude: int | None = None) -> int:
+        """A caption index drawn by weight, never ``exclude`` (when there is another).
+        Uniform schedules draw as they always did, so their datasets stay byte-identical."""
+        count = len(self.captions)
+        if self.weights is None:
+            if exclude is None:
+                return int(rng.integers(count))
+            k = int(rng.integers(count - 1))
+            return k + (k >= exclude)
+        p = np.asarray(self.weights)
+        if exclude is not None:
+            p = p.copy()
+            p[exclude] = 0.0
+        return int(rng.choice(count, p=p / p.sum()))
 
 
 def instruction_events(prev: State, cur: State) -> np.ndarray:
@@ -163,7 +207,7 @@ class InstructionScheduler:
         mask = np.ones(self.num_envs, bool) if mask is None else np.asarray(mask, bool)
         for i in np.flatnonzero(mask):
             self._rngs[i] = np.random.default_rng([int(seeds[i]), _STREAM])
-            self.index[i] = self._rngs[i].integers(len(self.schedule.captions))
+            self.index[i] = self.schedule.draw(self._rngs[i])
             self.start[i] = self.step[i] = 0
             self.resting[i] = False
             self._segments[i] = []
@@ -217,11 +261,9 @@ class InstructionScheduler:
 
     def _next(self, i: int) -> int:
         """A caption other than the current one (when there is another)."""
-        count = len(self.schedule.captions)
-        if count == 1:
+        if len(self.schedule.captions) == 1:
             return 0
-        k = int(self._rngs[i].integers(count - 1))
-        return k + (k >= self.index[i])
+        return self.schedule.draw(self._rngs[i], int(self.index[i]))
 
 
 def tally_outcomes(segments: list[list], schedule: InstructionSchedule) -> dict[str, dict]:
