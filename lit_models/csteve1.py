@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import torch
 
-from lit_models.init_weights import starting_weights
 from lit_models.sequence_bc import IGNORE_ACTION, SequenceBC, UpdateEvery
 from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
@@ -103,16 +102,9 @@ class CSteve1(SequenceBC):
                 f"model.init_args.goal_dim={self.hparams.goal_dim} but the data's goal embeddings "
                 f"(data.init_args.embeddings) have {data_dim} dimensions: set goal_dim={data_dim}"
             )
-        # after configure_model and a --ckpt_path restore (which sets _weights_ready), before
-        # the sanity check; load_from_checkpoint never reads the init_weights file
-        if not self._weights_ready:
-            self.model.load_state_dict(
-                starting_weights(self.hparams.init_weights, "csteve1", self.model, "C-Steve-1")
-            )
-            self._weights_ready = True
-
-    def on_load_checkpoint(self, checkpoint: dict) -> None:
-        self._weights_ready = True
+        # after configure_model and a --ckpt_path restore, before the sanity check (the network
+        # is built in configure_model, after setup); load_from_checkpoint never reads the file
+        self.load_starting_weights("csteve1", "C-Steve-1")
 
     def configure_model(self) -> None:
         """Build the network (Lightning calls this before training and before loading a

@@ -7,7 +7,6 @@ with C-Steve-1; this module builds the network from a preset and optional starti
 
 from __future__ import annotations
 
-from lit_models.init_weights import starting_weights
 from lit_models.sequence_bc import SequenceBC, UpdateEvery
 from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
@@ -101,14 +100,7 @@ class CVPT(SequenceBC):
 
     def setup(self, stage: str) -> None:
         # A --ckpt_path resume restores its own weights after this (on_load_checkpoint).
-        if not self._weights_ready:
-            self.model.load_state_dict(
-                starting_weights(self.hparams.init_weights, "cvpt", self.model, "C-VPT")
-            )
-            self._weights_ready = True
-
-    def on_load_checkpoint(self, checkpoint: dict) -> None:
-        self._weights_ready = True
+        self.load_starting_weights("cvpt", "C-VPT")
 
 
 __all__ = ["CVPT"]

@@ -41,6 +41,7 @@ from torch.utils.checkpoint import checkpoint
 from torchmetrics import MetricCollection
 from torchmetrics.classification import MulticlassAccuracy
 
+from lit_models.init_weights import starting_weights
 from lit_models.schedules import WarmupCosine
 
 IGNORE_ACTION = -1  # the episode's final observation has no action
@@ -79,6 +80,20 @@ class SequenceBC(L.LightningModule):
                 f"model.init_args.update_every={self.hparams.update_every!r}: expected one of"
                 f" {UPDATE_EVERY} (window: the paper's one optimizer step per TBPTT window)"
             )
+
+    _weights_ready = True  # False until a subclass given ``init_weights`` has loaded them
+
+    def load_starting_weights(self, kind: str, title: str) -> None:
+        """Load ``init_weights`` into the network once (``lit_models.init_weights``), unless a
+        ``--ckpt_path`` restore already gave this run its own weights."""
+        if not self._weights_ready:
+            self.model.load_state_dict(
+                starting_weights(self.hparams.init_weights, kind, self.model, title)
+            )
+            self._weights_ready = True
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        self._weights_ready = True
 
     def setup_metrics(self, num_actions: int) -> None:
         self.train_metrics = accuracy_metrics(num_actions, "train/")

@@ -263,19 +263,19 @@ def test_a_steve_learner_is_told_the_schedule_and_its_rollouts_are_reproducible(
     assert _shas(again) == _shas(out)
 
 
-def test_goal_directed_dagger_cli_names_what_is_missing(steve_learner, learner, tmp_path, capsys) -> None:
-    no_prior = _told_argv(steve_learner, tmp_path / "a")
-    i = no_prior.index("--prior")
-    del no_prior[i : i + 2]
-    with pytest.raises(SystemExit):
-        main(no_prior)
-    assert "a C-Steve-1 learner reads its instructions through --prior" in capsys.readouterr().err
-    untold = _told_argv(steve_learner, tmp_path / "b")
-    i = untold.index("--instructions")
-    del untold[i : i + 2]
-    with pytest.raises(SystemExit):
-        main(untold)
-    assert "a C-Steve-1 learner needs --instructions" in capsys.readouterr().err
+def test_goal_directed_dagger_cli_names_what_is_missing(
+    steve_learner, learner, tmp_path, capsys
+) -> None:
+    for dropped, message in [
+        ("--prior", "a C-Steve-1 learner reads its instructions through --prior"),
+        ("--instructions", "a C-Steve-1 learner needs --instructions"),
+    ]:
+        argv = _told_argv(steve_learner, tmp_path / dropped.strip("-"))
+        i = argv.index(dropped)
+        del argv[i : i + 2]
+        with pytest.raises(SystemExit):
+            main(argv)
+        assert message in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main([*_dagger_argv(learner, tmp_path / "c"), "--cclip", str(steve_learner["cclip"])])
     assert "--cclip apply to a C-Steve-1 learner" in capsys.readouterr().err
