@@ -20,6 +20,8 @@ FORMAT = "crafterplay"
 FORMAT_VERSION = 1
 VERSIONED_PACKAGES = ("crafter-zoo", "crafter", "craftax", "jax", "numpy", "zstandard")
 FLAT_DAGGER_KEYS = ("learner", "learner_sha256", "learner_temperature", "beta", "mix", "round")
+LATER_DAGGER_KEYS = ("cclip", "cclip_sha256", "prior", "prior_sha256", "cfg_scale")
+"""``DaggerSettings``' fields added after the flat form (a C-Steve-1 learner's goal models)."""
 """The DAgger settings that manifests written before ``GenerationConfig.dagger`` held flat in
 ``config``, beside ``source`` ("dagger" or None)."""
 ADDED_CONFIG_KEYS = ("instructions", "start_states")
@@ -96,7 +98,8 @@ def nest_dagger(config: dict) -> dict:
         return config
     config = dict(config)
     flat = {key: config.pop(key, None) for key in FLAT_DAGGER_KEYS}
-    config["dagger"] = flat if config.pop("source") == "dagger" else None
+    nested = flat | dict.fromkeys(LATER_DAGGER_KEYS)  # none of these folders had a C-Steve-1
+    config["dagger"] = nested if config.pop("source") == "dagger" else None
     return config
 
 
