@@ -32,9 +32,25 @@ from zoo.envs.base import episode_seed
 RESULTS = Path(__file__).parent / "results" / "data.json"
 
 
-def play_without_writing(gen: ShardGenerator) -> int:
-    """Play every episode of the dataset as `generate` schedules them; return frames seen."""
+def raw_env(gen: ShardGenerator):
+    """An env of ``gen``'s game that draws every frame, for raw play (env + frames + agent).
+    ``gen.env`` itself draws none where a state-only expert plays Craftax: generation then
+    draws the frames from the states on its encoder thread."""
+    if gen.pixels:
+        return gen.env
+    from zoo.envs import make_env
+    from zoo.envs.tasks.starts import TaskStartEnv
+
+    cfg = gen.config
+    env = make_env(cfg.env, gen.num_envs, pixels=True, max_steps=cfg.max_steps)
+    return TaskStartEnv(env) if cfg.start_states == "tasks" else env
+
+
+def play_without_writing(gen: ShardGenerator, env=None) -> int:
+    """Play every episode of the dataset as `generate` schedules them, in ``env`` (default
+    ``gen.env``; ``raw_env(gen)`` for raw play); return frames seen."""
     cfg, n = gen.config, gen.num_envs
+    env = gen.env if env is None else env
     frames = 0
     for index in range(cfg.num_shards):
         pending = iter(cfg.shard_episodes(index))
@@ -44,11 +60,11 @@ def play_without_writing(gen: ShardGenerator) -> int:
             episode = next(pending, None)
             if episode is not None:
                 active[slot], seeds[slot] = True, episode_seed(cfg.seed, episode)
-        step = gen.env.reset(seeds)
+        step = env.reset(seeds)
         gen.agent.reset(seeds)
         frames += int(active.sum())
         while active.any():
-            step = gen.env.step(np.asarray(gen.agent.act(step)))
+            step = env.step(np.asarray(gen.agent.act(step)))
             frames += int(active.sum())
             restart = np.zeros(n, bool)
             for slot in np.flatnonzero(active & step.done):
@@ -58,7 +74,7 @@ def play_without_writing(gen: ShardGenerator) -> int:
                 else:
                     restart[slot], seeds[slot] = True, episode_seed(cfg.seed, episode)
             if restart.any():
-                step = gen.env.reset(seeds, mask=restart)
+                step = env.reset(seeds, mask=restart)
                 gen.agent.reset(seeds, mask=restart)
                 frames += int(restart.sum())
     return frames
@@ -70,14 +86,16 @@ def bench_expert(expert: str, args, workdir: Path) -> dict:
         episodes_per_shard=args.episodes, chunk_length=args.chunk_length, max_steps=args.max_steps,
     )
     gen = ShardGenerator(config, args.num_envs, dataset_agent)
-    step = gen.env.reset(np.arange(gen.num_envs) + 10**6)  # compile reset/step, warm the agent
-    gen.agent.reset(np.arange(gen.num_envs) + 10**6)
-    for _ in range(20):
-        step = gen.env.step(np.asarray(gen.agent.act(step)))
+    raw = raw_env(gen)
+    for env in [gen.env] if raw is gen.env else [gen.env, raw]:  # compile, warm the agent
+        step = env.reset(np.arange(gen.num_envs) + 10**6)
+        gen.agent.reset(np.arange(gen.num_envs) + 10**6)
+        for _ in range(20):
+            step = env.step(np.asarray(gen.agent.act(step)))
     raw_fps, gen_fps, out = [], [], None
     for attempt in range(args.repeats):
         t = time.perf_counter()
-        frames = play_without_writing(gen)
+        frames = play_without_writing(gen, raw)
         raw_fps.append(frames / (time.perf_counter() - t))
         out = workdir / f"{expert}-{attempt}"
         t = time.perf_counter()

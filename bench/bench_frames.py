@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from bench_data import play_without_writing
+from bench_data import play_without_writing, raw_env
 
 from zoo.agents import dataset_agent
 from zoo.data.generate import GenerationConfig, ShardGenerator, generate
@@ -38,14 +38,16 @@ RESULTS = Path(__file__).parent / "results"
 MODES = ("stored", "rendered")
 
 
-def warm_up(gen: ShardGenerator) -> None:
-    """Compile env reset/step and the re-render, so no timed run pays for compiling."""
+def warm_up(gen: ShardGenerator, *envs) -> None:
+    """Compile reset/step of ``gen``'s env and ``envs`` (e.g. ``raw_env(gen)``) and the
+    re-render, so no timed run pays for compiling."""
     seeds = np.arange(gen.num_envs) + 10**6
-    step = gen.env.reset(seeds)
-    gen.agent.reset(seeds)
-    for _ in range(20):
-        step = gen.env.step(np.asarray(gen.agent.act(step)))
-    if gen.config.frames == "rendered":
+    for env in (gen.env, *envs):
+        step = env.reset(seeds)
+        gen.agent.reset(seeds)
+        for _ in range(20):
+            step = env.step(np.asarray(gen.agent.act(step)))
+    if not gen.pixels:  # frames drawn from the states: stored and rendered modes
         render_frames(empty_state(1), np.zeros((1, 2), np.uint32))
 
 
@@ -92,8 +94,9 @@ def main() -> None:
     )
     configs = {"stored": stored, "rendered": dataclasses.replace(stored, frames="rendered")}
     gens = {mode: ShardGenerator(cfg, args.num_envs, dataset_agent) for mode, cfg in configs.items()}
-    for gen in gens.values():
-        warm_up(gen)
+    raw = raw_env(gens["stored"])  # raw play draws every frame
+    warm_up(gens["stored"], raw)
+    warm_up(gens["rendered"])
 
     raw_fps: list[float] = []
     gen_fps: dict[str, list[float]] = {mode: [] for mode in MODES}
@@ -102,7 +105,7 @@ def main() -> None:
         outs = {}
         for attempt in range(args.repeats):
             start = time.perf_counter()
-            frames = play_without_writing(gens["stored"])
+            frames = play_without_writing(gens["stored"], raw)
             raw_fps.append(frames / (time.perf_counter() - start))
             for mode in MODES:
                 outs[mode] = Path(tmp) / f"{mode}-{attempt}"

@@ -167,7 +167,7 @@ def _nonzero_residual_frames(root: Path) -> tuple[int, int, float]:
 def part_data(args) -> dict:
     import dataclasses
 
-    from bench_data import play_without_writing
+    from bench_data import play_without_writing, raw_env
     from bench_frames import decode_fps, warm_up
 
     from zoo.agents import dataset_agent
@@ -191,12 +191,13 @@ def part_data(args) -> dict:
         for renderer in RENDERERS:
             use(renderer)
             gens = {m: ShardGenerator(c, 8, dataset_agent) for m, c in configs.items()}
-            for gen in gens.values():
-                warm_up(gen)
+            raw = raw_env(gens["stored"])  # raw play draws every frame with this renderer
+            warm_up(gens["stored"], raw)
+            warm_up(gens["rendered"])
             rounds: dict[str, list[float]] = {"raw": [], **{mode: [] for mode in configs}}
             for attempt in range(args.repeats):  # raw play and each mode in turns
                 start = time.perf_counter()
-                frames = play_without_writing(gens["stored"])
+                frames = play_without_writing(gens["stored"], raw)
                 rounds["raw"].append(frames / (time.perf_counter() - start))
                 for mode, config in configs.items():
                     root = Path(tmp) / f"{renderer}-{mode}-{attempt}"

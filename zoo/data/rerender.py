@@ -144,21 +144,26 @@ def _batch_renderer():
     return jax.jit(jax.vmap(render_one)), jax.devices("cpu")[0]
 
 
-def render_frames(state: State, state_rng: np.ndarray, renderer: str | None = None) -> np.ndarray:
+def render_frames(
+    state: State, state_rng: np.ndarray, renderer: str | None = None,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
     """Re-render (n, 144, 144, 3) uint8 frames from n steps of exported state and their
-    (n, 2) uint32 ``state_rng`` on the CPU (``renderer`` None: ``choose_renderer``'s)."""
+    (n, 2) uint32 ``state_rng`` on the CPU (``renderer`` None: ``choose_renderer``'s), into
+    ``out`` if given (C-contiguous uint8 of that shape)."""
     if render.choose_renderer(renderer) == "numba":
-        return render.render_frames(state, state_rng)
-    return _render_jax(state, state_rng)
+        return render.render_frames(state, state_rng, out)
+    return _render_jax(state, state_rng, out)
 
 
-def _render_jax(state: State, state_rng: np.ndarray) -> np.ndarray:
+def _render_jax(state: State, state_rng: np.ndarray, out: np.ndarray | None) -> np.ndarray:
     """Craftax's JAX renderer, RENDER_BATCH frames per call on the CPU backend."""
     import jax
 
     render_batch, cpu = _batch_renderer()
     n = len(state_rng)
-    out = np.empty((n, *FRAME_SHAPE), np.uint8)
+    if out is None:
+        out = np.empty((n, *FRAME_SHAPE), np.uint8)
     inputs = {k: np.asarray(state[k]) for k in render.STATE_INPUTS}
     for start in range(0, n, RENDER_BATCH):
         stop = min(start + RENDER_BATCH, n)

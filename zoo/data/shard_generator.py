@@ -195,8 +195,7 @@ class ShardGenerator:
         self.config = config
         self.num_envs = max(1, min(num_envs, config.episodes_per_shard, config.episodes))
         self.agent = build_agent(config, self.num_envs)
-        # rendered frames of a state-only expert are drawn once, by the re-render that codes them
-        self.pixels = config.frames != "rendered" or getattr(self.agent, "needs_pixels", True)
+        self.pixels = _env_draws_frames(config, self.agent)
         self.env = make_env(
             config.env, self.num_envs, pixels=self.pixels, max_steps=config.max_steps)
         if config.start_states == "tasks":
@@ -235,6 +234,8 @@ class ShardGenerator:
             in_use = 2 * self.num_envs + 2
             if self.pixels:  # drawn frames are copied into pooled buffers
                 encoder.submit(self.buffers.prefill, (cfg.chunk_length, *FRAME_SHAPE), in_use)
+            elif self.renderer is None:  # or drawn into one on the encoder
+                encoder.submit(self.buffers.prefill, (cfg.chunk_length, *FRAME_SHAPE), 1)
             if self.renderer is None:  # and laid out for the codec in one more
                 encoder.submit(self.buffers.prefill, (3, cfg.chunk_length, *PLANES_SHAPE[1:]), 1)
             encoder.submit(self.buffers.prefill, (cfg.chunk_length, STATE_ROW_BYTES), in_use)
@@ -248,6 +249,7 @@ class ShardGenerator:
                 recorders[slot] = EpisodeRecorder(
                     episode, int(seeds[slot]), workdir, cfg.chunk_length, meta, encoder, cfg.codec,
                     rendered=self.renderer is not None, instructed=self.scheduler is not None,
+                    drawn=self.pixels,
                 )
                 agreed[slot] = drove[slot] = 0
                 return True
@@ -334,9 +336,9 @@ class ShardGenerator:
         return self.scheduler.ids
 
     def _state_rngs(self, step: Step) -> np.ndarray | list[None]:
-        """Per env, Craftax's ``state_rng`` (rendered frames need it), else None. Read now:
-        the env's next call donates the buffers of ``step.raw``."""
-        if self.renderer is None:
+        """Per env, Craftax's ``state_rng`` (rendered frames, and frames the env did not draw,
+        need it), else None. Read now: the env's next call donates the buffers of ``step.raw``."""
+        if self.renderer is None and self.pixels:
             return [None] * self.num_envs
         return np.asarray(step.raw.state_rng)
 
@@ -411,6 +413,22 @@ class ShardGenerator:
         }
 
 
+def _env_draws_frames(config: GenerationConfig, agent) -> bool:
+    """Whether the env draws the frames. Craftax frames of a state-only expert are drawn on
+    the encoder thread from the states instead, so the playing thread never renders: always in
+    the rendered mode (the re-render that codes a chunk is its frames), and in the stored mode
+    where the env would draw them with the numba renderer. JAX's renderer (on a GPU, or
+    ZOO_RENDERER=jax) draws inside the env's jitted step for less than a JAX re-render costs
+    the encoder (stored generation at 0.93x raw play there, 0.73x re-rendered on 2 cores)."""
+    if config.env != "craftax" or getattr(agent, "needs_pixels", True):
+        return True
+    if config.frames == "rendered":
+        return False
+    from zoo.envs.craftax_env import env_renderer
+
+    return env_renderer() != "numba"
+
+
 def _frame(step: Step, slot: int) -> np.ndarray | None:
-    """Env ``slot``'s frame, or None when the env draws none (rendered frames, state-only expert)."""
+    """Env ``slot``'s frame, or None when the env draws none (Craftax, state-only expert)."""
     return None if step.frames is None else step.frames[slot]

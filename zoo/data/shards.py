@@ -31,7 +31,7 @@ from zoo.data.codec import (
     encode_json,
 )
 from zoo.data.noop import noop_runs
-from zoo.data.rerender import encode_rendered
+from zoo.data.rerender import encode_rendered, render_frames
 from zoo.data.tar_writer import tar_member
 from zoo.envs.schema import FRAME_SHAPE, STATE_FIELDS, State
 
@@ -76,15 +76,22 @@ def _unpack_states(rows: np.ndarray, n: int) -> State:
 
 def _spool_chunk(
     path: Path, n: int, frames: np.ndarray | None, rows: np.ndarray,
-    state_rng: np.ndarray | None, codec: FrameCodec, pool: BufferPool | None = None,
+    state_rng: np.ndarray | None, rendered: bool, codec: FrameCodec,
+    pool: BufferPool | None = None,
 ) -> tuple[int, list[tuple[str, int]], dict]:
     """Compress a chunk of n steps and append it to the spool; returns (offset,
     [(member, bytes)], the chunk's extra meta). ``rows``: the steps' packed states. Stored
-    chunks (``state_rng`` None) are laid out here, off the playing thread, in one numba pass
-    that lets go of the GIL (``tile_frames``); with ``state_rng`` the frames become residuals
-    against re-renders. Buffers go back to ``pool`` once coded."""
+    chunks are laid out here, off the playing thread, in one numba pass that lets go of the
+    GIL (``tile_frames``); ``rendered`` chunks store their frames as residuals against
+    re-renders. ``frames`` None (the env drew none: a state-only expert played Craftax): a
+    stored chunk's frames are drawn here from the states and ``state_rng``, also off the
+    playing thread. Buffers go back to ``pool`` once coded."""
     state = _unpack_states(rows, n)
-    if state_rng is None:
+    if not rendered:
+        if frames is None:  # bit-exact with the env's own frames (zoo.data.rerender)
+            shape = (len(rows), *FRAME_SHAPE)
+            frames = np.empty(shape, np.uint8) if pool is None else pool.take(shape)
+            render_frames(state, state_rng, out=frames[:n])
         planes = None if pool is None else pool.take((3, len(frames), *PLANES_SHAPE[1:]))
         members, meta = {FRAMES: encode_frames(frames[:n], codec, planes)}, {}
         if pool is not None:
@@ -197,6 +204,9 @@ class EpisodeRecorder:
             buffers of its ``pool``.
         rendered: keep each step's Craftax ``state_rng`` and store frames as residuals against
             re-renders from the state (``meta`` should name the renderer version).
+        drawn: whether the env draws frames (``observe`` gets them). False (Craftax played by
+            a state-only expert): each step's ``state_rng`` is kept and the encoder draws
+            the frames from the states, so the playing thread never renders.
         instructed: store each step's commanded instruction (``act``'s ``instruction``) as the
             steps array ``instruction``; other recorders write the format as before.
     """
@@ -212,6 +222,7 @@ class EpisodeRecorder:
         codec: FrameCodec,
         rendered: bool = False,
         instructed: bool = False,
+        drawn: bool = True,
     ) -> None:
         self.episode, self.seed, self.meta = episode, seed, meta
         self.chunk_length, self.encoder, self.codec = chunk_length, encoder, codec
@@ -222,8 +233,10 @@ class EpisodeRecorder:
         self._frames: np.ndarray | None = None
         self._rows: np.ndarray | None = None  # the chunk's packed states, also from the pool
         self._state: State = {}  # views of the rows as fields
-        self._rng = np.empty((chunk_length, 2), np.uint32) if rendered else None
-        self._drawn = True
+        self.rendered = rendered
+        keep_rng = rendered or not drawn
+        self._rng = np.empty((chunk_length, 2), np.uint32) if keep_rng else None
+        self._drawn = drawn
         self._fill = 0
         self._chunks: list[Future] = []
         self.actions: list[int] = []
@@ -249,19 +262,21 @@ class EpisodeRecorder:
         row: np.ndarray | None = None,
     ) -> None:
         """Add the observation at which the next action is taken (or the final one);
-        ``state_rng`` (Craftax's key of that state) is needed by rendered recorders, which
-        also take ``frame`` None when the env drew none (the frame is then the re-render).
+        ``state_rng`` (Craftax's key of that state) is needed by rendered recorders and those
+        made with ``drawn`` False, which take ``frame`` None when the env drew none (the
+        frame is then drawn from the state).
         ``row``: the state already packed (a row of ``state_views``' rows), copied in one
         assignment; ``state`` may then be None."""
         if self._rng is not None:
             if state_rng is None:
-                raise ValueError(f"episode {self.episode}: a rendered recorder needs state_rng")
+                raise ValueError(f"episode {self.episode}: this recorder needs state_rng "
+                                 "(rendered frames, or frames drawn from the states)")
             self._rng[self._fill] = state_rng
         if frame is None and self._rng is None:
             raise ValueError(f"episode {self.episode}: a stored-frames recorder needs the frame")
         if state is None and row is None:
             raise ValueError(f"episode {self.episode}: observe needs the state or its row")
-        self._drawn = frame is not None  # rendered recorders may get None: frame = re-render
+        self._drawn = frame is not None  # None: the frame is drawn from the state
         if self._drawn:  # into a pooled buffer, handed to the encoder at the flush
             if self._frames is None:
                 self._frames = self.encoder.pool.take((self.chunk_length, *FRAME_SHAPE))
@@ -299,7 +314,7 @@ class EpisodeRecorder:
             frames = None
         args = (frames, rows, None if self._rng is None else self._rng[:n].copy())
         job = self.encoder.submit_chunk(
-            _spool_chunk, self.spool, n, *args, self.codec, self.encoder.pool)
+            _spool_chunk, self.spool, n, *args, self.rendered, self.codec, self.encoder.pool)
         self._chunks.append(job)
         self._fill = 0
 

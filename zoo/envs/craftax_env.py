@@ -45,6 +45,14 @@ def enable_compilation_cache(path: str | None = None) -> None:
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 
+def env_renderer(renderer: str | None = None) -> str:
+    """The renderer a Craftax env draws its frames with: ``choose_renderer``'s, where JAX's
+    own renderer is the default on a GPU (the frame comes out of the jitted step there)."""
+    import jax
+
+    return choose_renderer(renderer, on_gpu=jax.default_backend() != "cpu")
+
+
 def frame_renderer():
     """Craftax's JAX pixel renderer at the zoo's block size, as the uint8 frame the envs
     return (the ``jax`` renderer; ``zoo.envs.render`` draws the same pixels with numba).
@@ -164,9 +172,7 @@ class CraftaxEnv:
         enable_compilation_cache()
         self.num_envs = num_envs
         self.pixels = pixels
-        self.renderer = (
-            choose_renderer(renderer, on_gpu=jax.default_backend() != "cpu") if pixels else None
-        )
+        self.renderer = env_renderer(renderer) if pixels else None
         self.params = EnvParams(max_timesteps=max_steps)
         self.static_params = StaticEnvParams()
         render = frame_renderer() if self.renderer == "jax" else None

@@ -29,6 +29,7 @@ from zoo.data.generate import GenerationConfig, ShardGenerator, generate
 from zoo.data.manifest import DatasetMismatchError, load_manifest
 from zoo.data.pool import WorkerError
 from zoo.data.reader import iter_chunks, iter_episodes, list_shards
+from zoo.data.shard_generator import _env_draws_frames
 from zoo.envs.base import episode_seed
 from zoo.envs.schema import STATE_FIELDS
 
@@ -147,8 +148,13 @@ def test_episodes_whole_and_in_order(crafter_dataset):
 
 
 def test_round_trip_is_bit_exact_against_a_replay(craftax_dataset, craftax_generator):
-    """Replaying the stored actions from the stored seed gives the stored frames and states."""
-    env = craftax_generator.env
+    """Replaying the stored actions from the stored seed gives the stored frames and states.
+    The random expert reads no pixels, so its env drew none: the stored frames were drawn
+    from the states on the encoder thread, and must equal those of an env that draws them."""
+    from zoo.envs import make_env
+
+    assert not craftax_generator.pixels
+    env = make_env("craftax", 2, pixels=True, max_steps=CRAFTAX.max_steps)
     for episode in iter_episodes(list_shards(craftax_dataset)):
         step = env.reset(np.array([episode["meta"]["seed"], 0]))
         for t, action in enumerate(episode["actions"]):
@@ -160,6 +166,36 @@ def test_round_trip_is_bit_exact_against_a_replay(craftax_dataset, craftax_gener
             step = env.step(np.array([action, 0]))
             assert step.reward[0] == episode["rewards"][t]
         assert step.done[0] and episode["meta"]["episode_length"] == t + 1
+
+
+def test_stored_shards_are_the_same_bytes_whoever_draws_the_frames(
+    craftax_dataset, craftax_generator, tmp_path, monkeypatch
+):
+    """With the numba renderer the encoder draws a state-only expert's frames from the
+    states; with JAX's the env draws them inside its jitted step (cheaper there). Same bytes."""
+    monkeypatch.setenv("ZOO_RENDERER", "jax")
+    generator = ShardGenerator(CRAFTAX, 2, dataset_agent)
+    assert generator.pixels and generator.env.renderer == "jax"
+    assert not craftax_generator.pixels
+    generate(CRAFTAX, tmp_path, progress=False, generator=generator)
+    assert _shas(tmp_path) == _shas(craftax_dataset)
+
+
+@pytest.mark.parametrize(
+    ("env", "frames", "renderer", "needs_pixels", "drawn"),
+    [
+        ("craftax", None, "numba", False, False),  # drawn on the encoder, from the states
+        ("craftax", None, "jax", False, True),  # inside the env's jitted step
+        ("craftax", "rendered", "jax", False, False),  # the re-render that codes a chunk
+        ("craftax", None, "numba", True, True),  # the agent looks at them
+        ("crafter", None, "numba", False, True),  # not a function of the exported state
+    ],
+)
+def test_who_draws_the_frames(env, frames, renderer, needs_pixels, drawn, monkeypatch):
+    monkeypatch.setenv("ZOO_RENDERER", renderer)
+    config = dataclasses.replace(CRAFTER, env=env, frames=frames)
+    agent = type("Agent", (), {"needs_pixels": needs_pixels})()
+    assert _env_draws_frames(config, agent) is drawn
 
 
 def test_same_seed_same_bytes_for_any_num_envs(craftax_dataset, tmp_path):

@@ -42,9 +42,12 @@ def choose_renderer(renderer: str | None = None, on_gpu: bool = False) -> str:
     return name
 
 
-def render_frames(state: State, state_rng: np.ndarray) -> np.ndarray:
+def render_frames(
+    state: State, state_rng: np.ndarray, out: np.ndarray | None = None
+) -> np.ndarray:
     """(n, 144, 144, 3) uint8 frames of n exported states (``zoo.envs.schema``, batched) and
-    their (n, 2) uint32 ``state_rng``, as Craftax-Classic's renderer draws them."""
+    their (n, 2) uint32 ``state_rng``, as Craftax-Classic's renderer draws them; into ``out``
+    if given (a C-contiguous uint8 array of that shape, e.g. a recycled buffer)."""
     from zoo.envs.render.kernel import render_batch
     from zoo.envs.render.textures import load_atlas
 
@@ -58,7 +61,11 @@ def render_frames(state: State, state_rng: np.ndarray) -> np.ndarray:
             raise ValueError(f"state field {k!r} has shape {v.shape}, expected "
                              f"{(n, *STATE_FIELDS[k].shape)} for {n} frames")
     counts = np.concatenate([s["player_vitals"].astype(np.int16), s["inventory"]], axis=1)
-    out = np.empty((n, *FRAME_SHAPE), np.uint8)
+    if out is None:
+        out = np.empty((n, *FRAME_SHAPE), np.uint8)
+    elif out.dtype != np.uint8 or out.shape != (n, *FRAME_SHAPE) or not out.flags.c_contiguous:
+        raise ValueError(f"out must be C-contiguous uint8 {(n, *FRAME_SHAPE)}, got "
+                         f"{out.dtype} {out.shape}")
     render_batch(
         out, *load_atlas(), s["map"], s["player_pos"], s["player_dir"], s["player_sleeping"],
         s["light_level"], counts, s["zombies_pos"], s["zombies_status"], s["cows_pos"],
