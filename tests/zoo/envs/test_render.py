@@ -272,6 +272,23 @@ def test_render_frames_checks_shapes():
         render_frames(empty_state(2), np.zeros((2, 3), np.uint32))
 
 
+def test_render_frames_into_a_given_buffer():
+    """Generation draws a chunk into a recycled buffer: the same frames, written in place; a
+    buffer of another shape or layout is refused before the kernel (which checks no bounds)."""
+    from zoo.envs.schema import empty_state
+
+    state, rng = empty_state(2), np.array([[1, 2], [3, 4]], np.uint32)
+    buffer = np.full((3, 144, 144, 3), 7, np.uint8)
+    view = buffer[:2]
+    assert render_frames(state, rng, out=view) is view
+    np.testing.assert_array_equal(buffer[:2], render_frames(state, rng))
+    assert (buffer[2] == 7).all()
+    with pytest.raises(ValueError, match=r"out must be C-contiguous uint8 \(2, 144, 144, 3\)"):
+        render_frames(state, rng, out=buffer)
+    with pytest.raises(ValueError, match="out must be C-contiguous"):
+        render_frames(state, rng, out=np.zeros((2, 144, 144, 3), np.uint8)[:, ::-1])
+
+
 def test_task_editor_frames_alike_with_either_renderer():
     """T1's editor (peaceful, full vitals, a starting inventory) re-renders its edited states
     with the env's renderer: the numba kernel after the jitted edit, or JAX inside it."""
