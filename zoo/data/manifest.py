@@ -20,10 +20,10 @@ FORMAT = "crafterplay"
 FORMAT_VERSION = 1
 VERSIONED_PACKAGES = ("crafter-zoo", "crafter", "craftax", "jax", "numpy", "zstandard")
 FLAT_DAGGER_KEYS = ("learner", "learner_sha256", "learner_temperature", "beta", "mix", "round")
-LATER_DAGGER_KEYS = ("cclip", "cclip_sha256", "prior", "prior_sha256", "cfg_scale")
-"""``DaggerSettings``' fields added after the flat form (a C-Steve-1 learner's goal models)."""
 """The DAgger settings that manifests written before ``GenerationConfig.dagger`` held flat in
 ``config``, beside ``source`` ("dagger" or None)."""
+LATER_DAGGER_KEYS = ("cclip", "cclip_sha256", "prior", "prior_sha256", "cfg_scale")
+"""``DaggerSettings``' fields added after the flat form (a C-Steve-1 learner's goal models)."""
 ADDED_CONFIG_KEYS = ("instructions", "start_states")
 """``config`` fields newer than some manifests, read as None (their default) where one lacks
 them, so an old folder's config reads as this zoo writes it."""

@@ -20,7 +20,7 @@ from zoo.experts.scripted.schedule import (
     InstructionScheduler,
     add_tallies,
     instruction_events,
-    schedule_captions,
+    read_schedule,
     tally_outcomes,
 )
 
@@ -76,7 +76,7 @@ def test_every_followable_caption_has_its_completing_achievement_and_a_caption_i
 def test_a_caption_file_names_the_captions(tmp_path) -> None:
     path = tmp_path / "goals.txt"
     path.write_text("# the two of T2\nplace plant on grass\n\n  place table on grass  # second\n")
-    assert schedule_captions(str(path)) == ("place plant on grass", "place table on grass")
+    assert read_schedule(str(path)) == (("place plant on grass", "place table on grass"), None)
     assert instruction_schedule(str(path), 9).caption_ids == (21, 13)
 
 
@@ -117,7 +117,7 @@ def test_bad_schedules_are_refused(captions, ids, timeout, message) -> None:
 
 def test_unknown_specs_and_captions_are_refused(tmp_path) -> None:
     with pytest.raises(ValueError, match="expected captions or subgoals or a file"):
-        schedule_captions("nothing-here")
+        read_schedule("nothing-here")
     (tmp_path / "bad.txt").write_text("obtain wood\nget rich\n")
     with pytest.raises(ValueError, match=r"cannot follow \['get rich'\]"):
         instruction_schedule(str(tmp_path / "bad.txt"), 5)

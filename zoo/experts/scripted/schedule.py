@@ -61,11 +61,6 @@ ENERGY = 3  # column of ``player_vitals``
 _STREAM = 0x1257  # the schedule's random stream, apart from the planner's (seeded by the seed)
 
 
-def schedule_captions(spec: str) -> tuple[str, ...]:
-    """The captions of ``spec`` (``read_schedule``), without their weights."""
-    return read_schedule(spec)[0]
-
-
 def read_schedule(spec: str) -> tuple[tuple[str, ...], tuple[float, ...] | None]:
     """The captions of ``spec`` and their draw weights: a name of ``CAPTION_SETS`` (uniform) or
     a text file with one caption per line, optionally ``caption | weight`` (blank lines and
