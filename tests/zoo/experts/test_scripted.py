@@ -174,6 +174,31 @@ def test_finds_the_nearest_pocket_to_dig_into_a_rock_face():
     assert find_pocket(View(state, 0), max_dist=40) is None
 
 
+def _told_drink(state, seeds, **tunables) -> list[int]:
+    """The first action told "obtain drink", per expert seed (the explore targets draw on it)."""
+    actions = []
+    for seed in seeds:
+        expert = ScriptedExpert(1, **tunables)
+        expert.reset(np.array([seed]))
+        expert.instruct(["obtain drink"])
+        step = Step(None, state, np.zeros(1, np.float32), np.zeros(1, bool))
+        actions.append(int(expert.act(step)[0]))
+    return actions
+
+
+def test_drink_in_view_explores_until_water_is_on_screen():
+    far, edge = _state(pos=(20, 20)), _state(pos=(20, 20))
+    far["map"][0, 20, 25] = Block.WATER  # 5 columns right: one past the 7 x 9 view
+    edge["map"][0, 23, 24] = Block.WATER  # the view's bottom-right corner
+    seeds = range(12)
+    assert set(_told_drink(far, seeds)) == {Action.MOVE_RIGHT}  # the privileged beeline
+    explored = _told_drink(far, seeds, drink_in_view=True)
+    assert set(explored) > {Action.MOVE_RIGHT}  # random far targets, not the unseen water
+    assert set(explored) <= {Action.MOVE_LEFT, Action.MOVE_RIGHT, Action.MOVE_UP, Action.MOVE_DOWN}
+    towards = {Action.MOVE_RIGHT, Action.MOVE_DOWN}
+    assert set(_told_drink(edge, seeds, drink_in_view=True)) <= towards
+
+
 def test_rejects_unknown_tunables_and_bad_seeds():
     with pytest.raises(ValueError, match="unknown ScriptedExpert tunables"):
         ScriptedExpert(2, no_such_knob=1)

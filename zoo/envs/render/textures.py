@@ -15,10 +15,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from zoo.envs.constants import Block, Item
+from zoo.envs.constants import VIEW, Block, Item
 
 BLOCK = 16
-VIEW = (7, 9)  # map tiles shown (rows, cols); the player stands on the centre one
 MAP_PX = (VIEW[0] * BLOCK, VIEW[1] * BLOCK)
 NUM_BLOCKS = len(Block)  # ids at or past this draw nothing (JAX adds no texture for them)
 DIGITS = 10

@@ -74,6 +74,10 @@ class ExpertConfig:
     """Share of steps spent walking to the tunnels while a skeleton is still wanted."""
     late_wood: int = 5
     """Once the tree is done, keep this much wood (spare tables) when trees are near."""
+    drink_in_view: bool = False
+    """Told "obtain drink", head for water only once it is in the player's 7 x 9 view, and
+    explore until then. A pixel learner cannot imitate a beeline to water it cannot see; the
+    default keeps the privileged beeline."""
     explore_dist: int = 12
     """Minimum path cost of a random exploration target."""
     explore_steps: int = 40

@@ -384,6 +384,13 @@ def _craft(tool: Item):
     return goal
 
 
+def _obtain_drink(planner: EnvPlanner, v: View) -> int | None:
+    """Drink; with ``drink_in_view``, explore until water is on screen."""
+    if planner.cfg.drink_in_view and not v.seen(v.map == Block.WATER):
+        return planner._explore(v)
+    return planner._drink(v)
+
+
 def _obtain_wood(planner: EnvPlanner, v: View) -> int | None:
     return act_on(v, v.map == Block.TREE, int(Action.DO))
 
@@ -393,7 +400,7 @@ INSTRUCTIONS = {
     "obtain stone": _mine(Block.STONE),
     "obtain coal": _mine(Block.COAL),
     "obtain sapling": _collect_sapling,
-    "obtain drink": lambda planner, v: planner._drink(v),
+    "obtain drink": _obtain_drink,
     "obtain ripe plant": _eat_plant,
     "place plant on grass": _place_plant,
     "place table on grass": _place(Action.PLACE_TABLE, Item.WOOD, lambda c: c.table_wood),
