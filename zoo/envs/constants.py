@@ -121,11 +121,11 @@ NUM_ACHIEVEMENTS = len(Achievement)
 ZOMBIE_ATTACK_COOLDOWN = 5
 SKELETON_RELOAD = 4
 
-# Row/column offsets of a step in each facing direction; direction ids are the move actions.
 VIEW: tuple[int, int] = (7, 9)
 """Map tiles the player sees (rows, cols), standing on the centre one: both games show 9 x 9
 tiles less 2 rows of inventory."""
 
+# Row/column offsets of a step in each facing direction; direction ids are the move actions.
 DIRECTION_OFFSETS: dict[int, tuple[int, int]] = {
     Action.MOVE_LEFT: (0, -1),
     Action.MOVE_RIGHT: (0, 1),
