@@ -19,7 +19,8 @@ import numpy as np
 from zoo.agents.base import InstructableAgent
 from zoo.envs.base import Step
 from zoo.envs.constants import Achievement as Ach
-from zoo.envs.constants import Block, Item
+from zoo.envs.constants import VIEW, Block, Item
+from zoo.envs.local_view import local_tiles
 from zoo.envs.schema import State
 from zoo.envs.tasks import TaskProgress, TaskSpec, get_task
 
@@ -58,18 +59,16 @@ class ChainConfig:
 
     table_wood: int = 2
     """Wood a table takes (both games as installed)."""
-    view_rows: int = 3
+    view_rows: int = VIEW[0] // 2
     """Map rows the agent sees above and below itself (the local view is 7 rows tall)."""
-    view_cols: int = 4
+    view_cols: int = VIEW[1] // 2
     """Map columns the agent sees left and right of itself (the local view is 9 wide)."""
 
 
 def _local_view(state: State, i: int, config: ChainConfig) -> np.ndarray:
     """The tiles of env ``i``'s map the agent sees: the planner must not know more than it."""
-    row, col = (int(v) for v in state["player_pos"][i])
-    rows = slice(max(0, row - config.view_rows), row + config.view_rows + 1)
-    cols = slice(max(0, col - config.view_cols), col + config.view_cols + 1)
-    return state["map"][i][rows, cols]
+    pos = (int(state["player_pos"][i][0]), int(state["player_pos"][i][1]))
+    return local_tiles(state["map"][i], pos, config.view_rows, config.view_cols)
 
 
 def plan_instruction(

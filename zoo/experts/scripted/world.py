@@ -10,7 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from zoo.envs.constants import DIRECTION_OFFSETS, VIEW, Action, Block, Item, Mob
+from zoo.envs.constants import DIRECTION_OFFSETS, Action, Block, Item, Mob
+from zoo.envs.local_view import local_tiles
 from zoo.envs.schema import State
 from zoo.experts.scripted.navigation import UNREACHABLE, distance_field, first_step, next_to
 
@@ -126,9 +127,7 @@ class View:
 
     def seen(self, mask: np.ndarray) -> bool:
         """Whether any cell of ``mask`` is on screen (the 7 x 9 tiles the player sees)."""
-        top, left = self.pos[0] - VIEW[0] // 2, self.pos[1] - VIEW[1] // 2
-        window = mask[max(top, 0):top + VIEW[0], max(left, 0):left + VIEW[1]]
-        return bool(window.any())
+        return bool(local_tiles(mask, self.pos).any())
 
     def is_free(self, cell: tuple[int, int]) -> bool:
         """Walkable now: grass/sand/path without a mob (never lava)."""
