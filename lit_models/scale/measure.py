@@ -2,11 +2,17 @@
 
 FLOPs are ``torch.utils.flop_counter.FlopCounterMode`` over a real forward and backward of the
 module's loss (matmuls, convolutions and attention; elementwise ops are not counted, the usual
-MFU convention). Activation bytes are the distinct storages autograd saves for backward
-(``saved_tensors_hooks``), parameters and buffers excluded, measured in the config's precision
-(CPU bf16 autocast for ``bf16-mixed``) at two batch sizes so a fixed part (autocast's bf16 weight
-copies) and a per-sample part can be told apart. The CPU step is timed in fp32 against the fp32
-matmul peak measured right after it: the fraction it reaches checks the FLOP model.
+MFU convention). torch's counter knows the CUDA attention kernels but not the CPU one that
+``F.scaled_dot_product_attention`` runs here (it would count 0), so ``CPU_ATTENTION`` counts it
+as the math path is counted (taken when the mask needs a gradient, as C-VPT's learned bias does):
+forward 2 matmuls (QK^T, AV) over every attended key, memory included, backward 4 (the grads of
+the scores, V, Q and K): 3x forward, as for a linear layer. The flash kernel also recomputes QK^T
+in backward, work the MFU convention (model FLOPs) leaves out. Activation bytes are the
+distinct storages autograd saves for backward (``saved_tensors_hooks``), parameters and buffers
+excluded, measured in the config's precision (CPU bf16 autocast for ``bf16-mixed``) at two batch
+sizes so a fixed part (autocast's bf16 weight copies) and a per-sample part can be told apart.
+The CPU step is timed in fp32 against the fp32 matmul peak measured right after it: the fraction
+it reaches checks the FLOP model.
 """
 
 from __future__ import annotations
@@ -20,13 +26,30 @@ from functools import partial
 
 import torch
 from torch.autograd.graph import saved_tensors_hooks
-from torch.utils.flop_counter import FlopCounterMode
+from torch.utils.flop_counter import FlopCounterMode, sdpa_flop_count
 
 from lit_models.scale import modules
 from lit_models.scale.stages import Stage
 
 TIMED_FLOPS = 1e9  # the CPU step is timed at a batch of at least this many FLOPs
 MIN_TIMED_S = 2.0  # cheap steps are repeated until this much has been timed
+Shape = tuple[int, ...]
+
+
+def _attention_flops(query: Shape, key: Shape, value: Shape, *_, **__) -> int:
+    """Forward FLOPs of the CPU flash attention op (FlopCounterMode passes shapes)."""
+    return sdpa_flop_count(query, key, value)
+
+
+def _attention_backward_flops(grad: Shape, query: Shape, key: Shape, value: Shape, *_, **__) -> int:
+    """Backward FLOPs of the CPU flash attention op: twice its forward, QK^T's recompute apart."""
+    return 2 * sdpa_flop_count(query, key, value)
+
+
+CPU_ATTENTION = {
+    torch.ops.aten._scaled_dot_product_flash_attention_for_cpu: _attention_flops,
+    torch.ops.aten._scaled_dot_product_flash_attention_for_cpu_backward: _attention_backward_flops,
+}
 
 
 @dataclass
@@ -121,7 +144,7 @@ def count(
 ) -> tuple[int, int]:
     """(forward + backward FLOPs, or 0 without ``flops``; bytes saved for backward) of the
     scalar ``run()`` returns, computed under CPU bf16 autocast when ``mixed``."""
-    counter = FlopCounterMode(display=False) if flops else None
+    counter = FlopCounterMode(display=False, custom_mapping=CPU_ATTENTION) if flops else None
     with counter or contextlib.nullcontext(), SavedTensors(exclude) as saved:
         with autocast("cpu", mixed):
             value = run()
@@ -200,6 +223,6 @@ def measure_torch_stage(
 
 
 __all__ = [
-    "Measurement", "SavedTensors", "autocast", "best_time", "count", "count_stage",
+    "CPU_ATTENTION", "Measurement", "SavedTensors", "autocast", "best_time", "count", "count_stage",
     "cpu_peak_flops", "measure_torch_stage", "time_steps", "train_step", "trainable_optimizer",
 ]  # fmt: skip
