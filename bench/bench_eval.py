@@ -193,6 +193,22 @@ def _split(env_name: str, timers: Timers, wall: float, render_share: float | Non
     }
 
 
+def episodes_per_s(lengths: list[int], env_steps: int, wall: float,
+                   all_finished: bool) -> tuple[float | None, str]:
+    """Episodes/s of a loop that played ``env_steps`` in ``wall`` s and finished episodes of
+    ``lengths``, and how it was found: a loop stopped by its budget has every slot busy, so
+    slots finish episodes at env steps/s / mean episode length."""
+    if all_finished:
+        return len(lengths) / wall, "all episodes finished: episodes / wall"
+    if not lengths:
+        return None, "budget reached before any episode finished"
+    return env_steps / wall / float(np.mean(lengths)), (
+        "budget reached: env_steps_per_s / mean length of the episodes finished in the run; "
+        "an upper estimate (the finished ones lean short: long ones are still running, "
+        "running_episode_steps); episodes_finished_per_s is a lower one (all slots started "
+        "together, so none can finish before the shortest episode's length)")
+
+
 def measure(agent_name: str, env_name: str, num_envs: int, episodes: int, budget: int,
             warmup_steps: int, max_seconds: float = float("inf"),
             profile_dir: Path | None = None, profile_steps: int = 0) -> dict:
@@ -299,20 +315,8 @@ def measure(agent_name: str, env_name: str, num_envs: int, episodes: int, budget
     row["slot_utilisation"] = played_steps / slot_steps
     row["slot_steps_per_s"] = slot_steps / wall
     row["episodes_finished_per_s"] = len(lengths) / wall
-    if not stopped_by_budget:
-        row["episodes_per_s"] = len(lengths) / wall
-        row["episodes_per_s_method"] = "all episodes finished: episodes / wall"
-    elif lengths:
-        row["episodes_per_s"] = row["env_steps_per_s"] / row["mean_episode_length"]
-        row["episodes_per_s_method"] = (
-            "budget reached: env_steps_per_s / mean length of the episodes finished in the run; "
-            "an upper estimate (the finished ones lean short: long ones are still running, "
-            "running_episode_steps); episodes_finished_per_s is a lower one (all slots started "
-            "together, so none can finish before the shortest episode's length)"
-        )
-    else:
-        row["episodes_per_s"] = None
-        row["episodes_per_s_method"] = "budget reached before any episode finished"
+    row["episodes_per_s"], row["episodes_per_s_method"] = episodes_per_s(
+        lengths, played_steps, wall, all_finished=not stopped_by_budget)
     if stopped_by_budget:
         row["running_episode_steps"] = (batched[0] - start_at).tolist()  # unfinished so far
     row["time_split"] = _split(

@@ -46,17 +46,23 @@ def _episode(i: int, steps: list[int | None]) -> TaskEpisode:
 
 
 def test_compare_success_counts_ahead_and_separated_tasks():
+    """Two-proportion p-values by hand, 100 episodes each: 39 vs 7, pooled 0.23, z = 0.32 /
+    sqrt(0.23 * 0.77 * 0.02) = 5.3768, p = 7.58e-8; 50 vs 62, pooled 0.56, z = -0.12 / 0.070200
+    = -1.7094, p = 0.0874; 99 vs 92, pooled 0.955, z = 0.07 / 0.029317 = 2.3877, p = 0.0170
+    (below 0.05 though the Wilson intervals overlap); 62 vs 62, z = 0, p = 1."""
     def cell(successes: int, n: int = 100) -> dict:
-        return {"success_percent": 100 * successes / n,
+        return {"successes": successes, "episodes": n, "success_percent": 100 * successes / n,
                 "wilson95_percent": [100 * x for x in wilson_interval(successes, n)]}
 
-    steve = {"a": cell(39), "b": cell(50), "c": cell(99), "d": cell(30)}
-    cvpt = {"a": cell(7), "b": cell(62), "c": cell(92)}  # no "d": not compared
+    steve = {"a": cell(39), "b": cell(50), "c": cell(99), "d": cell(30), "e": cell(62)}
+    cvpt = {"a": cell(7), "b": cell(62), "c": cell(92), "e": cell(62)}  # no "d": not compared
     result = compare_success(steve, cvpt)
-    assert result["tasks"] == ["a", "b", "c"]
-    assert result["ahead"] == ["a", "c"]
+    assert result["tasks"] == ["a", "b", "c", "e"]
+    assert result["ahead"] == ["a", "c"]  # a tie (e) is not ahead
     # 99/100 -> 94.6-99.8% overlaps 92/100 -> 85.0-95.9%; 39/100 (30.0-48.8) clears 7/100 (3.4-13.7)
     assert result["separated"] == ["a"]
+    assert result["p_two_proportion"] == pytest.approx(
+        {"a": 7.5812e-8, "b": 0.087375, "c": 0.016955, "e": 1.0}, rel=1e-4)
 
 
 def test_summary_and_report(tmp_path):

@@ -33,6 +33,7 @@ from zoo.envs.base import GameEnv, Step
 from zoo.envs.tasks.specs import DRINK_SUB, PLANT, SAPLING, TABLE, WOOD_PICKAXE, SubTask
 from zoo.eval.play import inference_meta
 from zoo.eval.rollout import evaluate
+from zoo.eval.stats import disjoint_above, p_text, two_proportion_p
 from zoo.eval.task_eval import wilson_interval
 from zoo.files import atomic_write_text
 
@@ -55,8 +56,9 @@ DESCRIPTION = (
     f"{', '.join(repr(c.instruction) for c in COLUMNS)}, then {NO_INSTRUCTION} (C-Steve-1's zero "
     "goal, the scripted expert's normal play); episode j of every row is seeded from (--seed, "
     "j). Writes OUT/report.json, OUT/report.md (the matrix and the verdict: in how many "
-    "columns the agent's own instruction is the maximum, is separated from no instruction, is "
-    "worse than it) and OUT/matrix.png; each row is saved as OUT/<game>/<row>.json, and a rerun "
+    "columns the agent's own instruction is the maximum, has a disjoint 95% interval above no "
+    "instruction's, or below it; per column the two-proportion test p-value against no "
+    "instruction) and OUT/matrix.png; each row is saved as OUT/<game>/<row>.json, and a rerun "
     "reads the saved rows instead of playing them."
 )
 HORIZONS = "also score the same episodes within their first H steps (each H <= --max-steps)"
@@ -112,8 +114,10 @@ def count_matrix(
 
 def verdict(counts: Counts, episodes: int, columns: Sequence[SubTask]) -> list[dict]:
     """Per column, its own instruction against the other rows. A tie at the top counts as the
-    column maximum (``own_is_max_tied`` says so); "separated" means disjoint Wilson 95%
-    intervals; ``above_none``/``below_none`` compare counts alone."""
+    column maximum (``own_is_max_tied`` says so); "separated" (and ``worse_than_none``) means
+    disjoint Wilson 95% intervals, much stricter than a 95% test, so ``p_two_proportion_vs_none``
+    gives the two-sided two-proportion test against no instruction too; ``above_none`` and
+    ``below_none`` compare counts alone."""
     result = []
     for column in columns:
         a, own_label = ACHIEVEMENT_NAMES[column.achievement], column.instruction
@@ -126,10 +130,11 @@ def verdict(counts: Counts, episodes: int, columns: Sequence[SubTask]) -> list[d
             "achievement": a, "instruction": own_label, "own": own, "no_instruction": none,
             "best_other": [r for r, k in others.items() if k == best], "best_other_count": best,
             "own_is_max": own >= top, "own_is_max_tied": own == top,
-            "above_none": own > none, "separated_from_none": own_ci[0] > none_ci[1],
-            "below_none": own < none, "worse_than_none": own_ci[1] < none_ci[0],
+            "above_none": own > none, "separated_from_none": disjoint_above(own_ci, none_ci),
+            "below_none": own < none, "worse_than_none": disjoint_above(none_ci, own_ci),
             "separated_from_best_other": best is not None
-            and own_ci[0] > interval(best, episodes)[1],
+            and disjoint_above(own_ci, interval(best, episodes)),
+            "p_two_proportion_vs_none": two_proportion_p(own, episodes, none, episodes),
         })
     return result
 
@@ -143,9 +148,10 @@ def verdict_line(game: str, s: dict[str, int]) -> str:
     return (
         f"{game}: own instruction is the column maximum in {s['own_is_max']} of {s['columns']} "
         f"columns ({s['own_is_max_tied']} tied); above no instruction in {s['above_none']}, "
-        f"separated (95%) in {s['separated_from_none']}; below no instruction in "
-        f"{s['below_none']}, separated (worse told than untold) in {s['worse_than_none']}; "
-        f"separated above the best other instruction in {s['separated_from_best_other']}"
+        f"disjoint 95% intervals in {s['separated_from_none']}; below no instruction in "
+        f"{s['below_none']}, disjoint 95% intervals (worse told than untold) in "
+        f"{s['worse_than_none']}; disjoint 95% intervals above the best other instruction in "
+        f"{s['separated_from_best_other']}"
     )
 
 
@@ -304,7 +310,8 @@ def run(
         }
         for h, g in [(setting.max_steps, report["games"][game]),
                      *((int(h), g) for h, g in report["games"][game]["horizons"].items())]:
-            print(f"within {h} steps: {g['verdict_line']}", flush=True)
+            print(f"within {h} steps: {g['verdict_line']}", *versus_none(g, setting.episodes),
+                  sep="\n", flush=True)
     report["written_at"] = datetime.now(UTC).isoformat(timespec="seconds")
     report["files"] = ["report.json", "report.md", "matrix.png"]
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -315,8 +322,8 @@ def run(
 
 def format_markdown(report: dict) -> str:
     """Per game the matrix (k/N and the Wilson 95% interval in %; bold: the row's own
-    instruction, italic: the column's best other instruction, if it gets any) and its verdict
-    line."""
+    instruction, italic: the column's best other instruction, if it gets any), each column's
+    own instruction against none (``versus_none``) and the verdict line."""
     s = report["setting"]
     who = s["agent"] + (f" ({s['checkpoint']})" if s["checkpoint"] else "")
     guidance = "" if s["cfg_scale"] is None else f", guidance scale {s['cfg_scale']:g}"
@@ -330,11 +337,31 @@ def format_markdown(report: dict) -> str:
     ]
     names = [c["achievement"] for c in report["columns"]]
     for game, g in report["games"].items():
-        lines += ["", f"## {game}", "", *_table(g, names, s["episodes"]), "", g["verdict_line"]]
+        lines += ["", f"## {game}", "", *_scored(g, names, s["episodes"])]
         for h, within in g.get("horizons", {}).items():
             lines += ["", f"### {game}, the same episodes within {h} steps", "",
-                      *_table(within, names, s["episodes"]), "", within["verdict_line"]]
+                      *_scored(within, names, s["episodes"])]
     return "\n".join(lines) + "\n"
+
+
+def _scored(g: dict, names: list[str], episodes: int) -> list[str]:
+    """One scored matrix (``score``) as markdown: the table, own against none, the verdict."""
+    return [*_table(g, names, episodes), "", *versus_none(g, episodes), "", g["verdict_line"]]
+
+
+def versus_none(g: dict, episodes: int) -> list[str]:
+    """Per column, told against untold as markdown table lines: the counts, whether their
+    Wilson 95% intervals are disjoint, and the two-proportion test's p-value (the stricter
+    bar and the usual one: 38/50 vs 27/50 overlap, yet p = 0.021)."""
+    lines = ["| column | told | untold | disjoint 95% intervals | two-proportion p |",
+             "|---|---:|---:|---|---:|"]
+    for c in g["columns"]:
+        disjoint = "above" if c["separated_from_none"] else (
+            "below" if c["worse_than_none"] else "no")
+        lines.append(f"| {c['achievement']} | {c['own']}/{episodes} | "
+                     f"{c['no_instruction']}/{episodes} | {disjoint} | "
+                     f"{p_text(c['p_two_proportion_vs_none'])} |")
+    return lines
 
 
 def _table(g: dict, names: list[str], episodes: int) -> list[str]:

@@ -8,11 +8,17 @@ crafter's ``Recorder`` appends one JSON object per finished episode::
 times the achievement was unlocked, keys in crafter's (alphabetical) order. Our rollouts know
 whether each achievement was unlocked, not how often (Craftax keeps flags only), so we write
 1/0; crafter's analysis only tests ``>= 1``, so scores computed from the file are unchanged.
+
+Also the two comparisons the reports state beside Wilson 95% intervals (``disjoint_above``, the
+"separated" of the instruction matrix and the task tables, and ``two_proportion_p``): disjoint
+95% intervals are a much stricter bar than a 95% test, so the reports give both.
 """
 
 from __future__ import annotations
 
 import json
+import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +30,31 @@ CRAFTER_ACHIEVEMENT_ORDER: tuple[str, ...] = tuple(sorted(ACHIEVEMENT_NAMES))
 STATS_KEYS: tuple[str, ...] = ("length", "reward") + tuple(
     f"achievement_{name}" for name in CRAFTER_ACHIEVEMENT_ORDER
 )
+
+
+def disjoint_above(a: Sequence[float], b: Sequence[float]) -> bool:
+    """Whether interval ``a`` (low, high) lies wholly above ``b``: every "separated" verdict.
+    Intervals that touch share a point, so they are not disjoint."""
+    return a[0] > b[1]
+
+
+def two_proportion_p(k1: int, n1: int, k2: int, n2: int) -> float:
+    """Two-sided p-value of the pooled two-proportion z-test of k1/n1 against k2/n2 (normal
+    approximation); 1.0 when the pooled rate is 0 or 1 (both rates equal, no variance)."""
+    for k, n in ((k1, n1), (k2, n2)):
+        if n < 1 or not 0 <= k <= n:
+            raise ValueError(f"need 0 <= k <= n and n >= 1, got k={k}, n={n}")
+    pooled = (k1 + k2) / (n1 + n2)
+    se = math.sqrt(pooled * (1 - pooled) * (1 / n1 + 1 / n2))
+    if se == 0:
+        return 1.0
+    z = (k1 / n1 - k2 / n2) / se
+    return math.erfc(abs(z) / math.sqrt(2))  # 2 (1 - Phi(|z|))
+
+
+def p_text(p: float) -> str:
+    """A p-value as the reports print it: three decimals, "< 0.001" below that."""
+    return "< 0.001" if p < 0.001 else f"{p:.3f}"
 
 
 def stats_lines(unlocks: np.ndarray, returns: np.ndarray, lengths: np.ndarray) -> list[str]:

@@ -22,6 +22,7 @@ from zoo.envs.base import Step
 from zoo.envs.tasks import TaskEnv
 from zoo.eval.plots import write_gif
 from zoo.eval.rollout import EpisodeResult, evaluate
+from zoo.eval.stats import disjoint_above, two_proportion_p
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -215,15 +216,19 @@ def format_task_table(report: dict) -> str:
     return "\n".join(lines)
 
 
-def compare_success(agent: dict[str, dict], baseline: dict[str, dict]) -> dict[str, list[str]]:
+def compare_success(agent: dict[str, dict], baseline: dict[str, dict]) -> dict:
     """Tasks (keys present in both) where ``agent``'s task report has a higher success rate
     than ``baseline``'s ("ahead"), and where its Wilson 95% interval lies wholly above the
-    baseline's ("separated"): the C-Steve-1 issue's test against unconditioned C-VPT."""
+    baseline's ("separated": disjoint 95% intervals, much stricter than a 95% test), with each
+    task's two-sided two-proportion p-value: the C-Steve-1 issue's test against unconditioned
+    C-VPT."""
     tasks = [t for t in agent if t in baseline]
     return {
         "tasks": tasks,
         "ahead": [t for t in tasks if agent[t]["success_percent"] > baseline[t]["success_percent"]],
-        "separated": [
-            t for t in tasks if agent[t]["wilson95_percent"][0] > baseline[t]["wilson95_percent"][1]
-        ],
+        "separated": [t for t in tasks if disjoint_above(agent[t]["wilson95_percent"],
+                                                         baseline[t]["wilson95_percent"])],
+        "p_two_proportion": {t: two_proportion_p(agent[t]["successes"], agent[t]["episodes"],
+                                                 baseline[t]["successes"], baseline[t]["episodes"])
+                             for t in tasks},
     }

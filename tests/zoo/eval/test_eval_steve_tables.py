@@ -14,6 +14,7 @@ import torch
 
 from zoo.cli import build_parser, main
 from zoo.eval import steve_tables
+from zoo.eval.task_eval import wilson_interval
 
 # the commands of docs/results/csteve1.md, both games
 GOAL_CHECK = ["eval", "goal-check", "--cclip", "weights/cclip_cpu", "--prior", "weights/prior_cpu",
@@ -51,6 +52,23 @@ def test_the_protocols_parse_with_the_docs_flags() -> None:
     # None: what the C-Steve-1 export records (else 1.5 and 1)
     assert (defaults.seed, defaults.cfg_scale, defaults.temperature) == (0, None, None)
     assert defaults.rows == list(steve_tables.TABLE_ROWS)
+
+
+def test_versus_cvpt_states_disjoint_intervals_and_the_p_value() -> None:
+    """50 episodes a cell. Sapling 38 vs 27: ahead, Wilson intervals 62.6-85.7% and 40.4-67.0%
+    overlap, two-proportion p = 0.021 (pooled 0.65, z = 2.306); drink 40 vs 25: 67.0-88.8% and
+    36.6-63.4% are disjoint, p = 0.0017 (z = 3.145)."""
+    def row(task: str, agent: str, k: int) -> dict:
+        return {"env": "crafter", "task": task, "agent": agent, "episodes": 50, "successes": k,
+                "success_percent": 2.0 * k,
+                "wilson95_percent": [100 * x for x in wilson_interval(k, 50)]}
+
+    rows = [row("collect_sapling", "csteve1", 38), row("collect_sapling", "cvpt", 27),
+            row("collect_drink", "csteve1", 40), row("collect_drink", "cvpt", 25)]
+    assert steve_tables.versus_cvpt(rows) == [
+        "crafter: C-Steve-1 ahead of C-VPT on 2 of 2 tasks (collect_sapling, collect_drink), "
+        "disjoint 95% intervals on 1 (collect_drink); two-proportion p: collect_sapling 0.021, "
+        "collect_drink 0.002"]
 
 
 def test_eval_help_lists_the_protocols(capsys: pytest.CaptureFixture) -> None:
@@ -196,7 +214,8 @@ def test_cfg_sweep_names_a_row_per_scale_and_plots_them(
     def cell(self: steve_tables.Setting, env_name: str, task: str, row: str, agent: object,
              instruction: str | None) -> dict:
         played.append((env_name, task, row, instruction))
-        return {"episodes": 2, "success_percent": 50.0, "wilson95_percent": [9.5, 90.5],
+        return {"episodes": 2, "successes": 1, "success_percent": 50.0,
+                "wilson95_percent": [9.5, 90.5],
                 "median_steps_to_success": 7.0}
 
     monkeypatch.setattr(steve_tables.Setting, "steve", lambda self, cfg_scale: None)

@@ -45,7 +45,7 @@ def test_the_verdict_on_a_hand_made_matrix() -> None:
     assert drink["own_is_max"] and drink["own_is_max_tied"]
     assert not (drink["above_none"] or drink["below_none"] or drink["worse_than_none"])
     assert drink["best_other"] == ["obtain sapling"]
-    # told 2/20 (2.8-30.1%), untold 15/20 (53.1-88.8%): worse told, separated
+    # told 2/20 (2.8-30.1%), untold 15/20 (53.1-88.8%): worse told, disjoint intervals
     assert not table["own_is_max"] and table["below_none"] and table["worse_than_none"]
     assert matrix.summarize(columns) == {
         "columns": 3, "own_is_max": 2, "own_is_max_tied": 1, "above_none": 1,
@@ -54,6 +54,40 @@ def test_the_verdict_on_a_hand_made_matrix() -> None:
     }
     line = matrix.verdict_line("crafter", matrix.summarize(columns))
     assert line.startswith("crafter: own instruction is the column maximum in 2 of 3 columns")
+    assert "above no instruction in 1, disjoint 95% intervals in 1;" in line
+
+
+def test_disjoint_intervals_are_a_stricter_bar_than_a_two_proportion_test() -> None:
+    """50 episodes a row. Told 38 (Wilson 62.6-85.7%) vs untold 27 (40.4-67.0%): the intervals
+    overlap, so not separated, yet the two-proportion test gives p = 0.021 (z = 2.306). Told 40
+    (67.0-88.8%) vs untold 25 (36.6-63.4%): disjoint, p = 0.00166 (pooled 0.65, z = 0.3 /
+    0.0954 = 3.145). Swapped, told below untold: worse than none only when disjoint."""
+    def column(told: int, untold: int) -> dict:
+        rows = counts({"obtain sapling": (told, 0, 0), NO_INSTRUCTION: (untold, 0, 0)})
+        return matrix.verdict(rows, 50, (SAPLING,))[0]
+
+    overlap, disjoint = column(38, 27), column(40, 25)
+    assert overlap["above_none"] and not overlap["separated_from_none"]
+    assert overlap["p_two_proportion_vs_none"] == pytest.approx(0.021098, abs=1e-6)
+    assert disjoint["separated_from_none"]
+    assert disjoint["p_two_proportion_vs_none"] == pytest.approx(0.001662, abs=1e-6)
+    assert not column(27, 38)["worse_than_none"] and column(25, 40)["worse_than_none"]
+    assert matrix.versus_none({"columns": [overlap, disjoint, column(25, 40)]}, 50)[2:] == [
+        "| collect_sapling | 38/50 | 27/50 | no | 0.021 |",
+        "| collect_sapling | 40/50 | 25/50 | above | 0.002 |",
+        "| collect_sapling | 25/50 | 40/50 | below | 0.002 |",
+    ]
+
+
+def test_intervals_that_touch_are_not_separated(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No pair of counts gives Wilson bounds that meet exactly, so the cells' intervals are
+    set by hand: told 60-80% touches untold 40-60% at 60, a shared point."""
+    hand = {30: [60.0, 80.0], 20: [40.0, 60.0]}
+    monkeypatch.setattr(matrix, "interval", lambda k, n: hand[k])
+    for told, untold in ((30, 20), (20, 30)):
+        rows = counts({"obtain sapling": (told, 0, 0), NO_INSTRUCTION: (untold, 0, 0)})
+        c = matrix.verdict(rows, 50, (SAPLING,))[0]
+        assert not (c["separated_from_none"] or c["worse_than_none"])
 
 
 def test_one_more_episode_separates_from_the_best_other() -> None:
@@ -64,7 +98,9 @@ def test_one_more_episode_separates_from_the_best_other() -> None:
 @pytest.mark.parametrize(
     "k, n, low, high",  # by hand: center (p + z²/2n) / (1 + z²/n) ± z/(1 + z²/n) √(p(1-p)/n + z²/4n²)
     [(0, 20, 0.0, 16.11), (10, 20, 29.93, 70.07), (18, 20, 69.90, 97.21), (20, 20, 83.89, 100.0),
-     (1, 2, 9.45, 90.55)],
+     (1, 2, 9.45, 90.55),
+     # 38/50: center 0.798416 / 1.076832 = 0.741449, half 1.96 / 1.076832 √0.00403216 = 0.115578
+     (38, 50, 62.59, 85.70), (27, 50, 40.40, 67.03)],
 )
 def test_cells_carry_wilson_95_intervals(k: int, n: int, low: float, high: float) -> None:
     assert matrix.interval(k, n) == pytest.approx([low, high], abs=0.01)
@@ -141,6 +177,8 @@ def test_the_scripted_expert_plays_the_matrix_then_a_rerun_reads_it(
         row = json.loads((out / "crafter" / f"{name}.json").read_text())
         assert [e["seed"] for e in row["episodes"]] == [episode_seed(0, j) for j in range(2)]
     assert game["verdict_line"] in (out / "report.md").read_text()
+    assert "| column | told | untold | disjoint 95% intervals | two-proportion p |" in (
+        out / "report.md").read_text()
     within = game["horizons"]["20"]  # the same saved rows, scored within 20 steps
     rows = {name: [json.loads((out / "crafter" / f"{name}.json").read_text())]
             for name in ("obtain_sapling", "no_instruction")}
