@@ -15,6 +15,9 @@ three of Gymnasium's (default ``NEXT_STEP``, as Gymnasium's own vector envs):
 - ``SAME_STEP``: the ending step resets at once; the ended episode's last observation and info
   are in ``info["final_obs"]`` and ``info["final_info"]``.
 - ``DISABLED``: the caller resets ended envs with ``reset(options={"reset_mask": mask})``.
+
+A masked reset's info is Gymnasium's: the ``_key`` masks mark only the envs reset, and the other
+envs' rows are zeros.
 """
 
 from __future__ import annotations
@@ -50,11 +53,19 @@ def reset_mask(options: dict[str, Any] | None, num_envs: int) -> np.ndarray:
     return mask
 
 
-def _masked(info: dict[str, np.ndarray], mask: np.ndarray) -> dict[str, np.ndarray]:
-    """A vector info as Gymnasium's vector envs batch one: every key with its ``_key`` mask."""
-    out = dict(info)
-    for key in info:
-        out[f"_{key}"] = mask
+def _rows_mask(mask: np.ndarray, like: np.ndarray) -> np.ndarray:
+    return mask.reshape((-1,) + (1,) * (like.ndim - 1))
+
+
+def masked_info(info: dict[str, np.ndarray], mask: np.ndarray) -> dict[str, np.ndarray]:
+    """``info`` of the envs in ``mask`` as Gymnasium's vector envs batch it (``_add_info``):
+    each key with its own ``_key`` mask, zeros in the rows of the other envs."""
+    out, every = {}, mask.all()
+    for key, value in info.items():
+        out[key] = value if every else np.where(
+            _rows_mask(mask, value), value, np.zeros_like(value)
+        )
+        out[f"_{key}"] = mask.copy()
     return out
 
 
@@ -101,7 +112,7 @@ class CraftaxVectorEnv(VectorEnv):
             seed = int(self.np_random.integers(2**31))
         obs, info = self.batch.reset(mask, seed)
         self._ended[mask] = False
-        return obs, _masked(info, np.ones(self.num_envs, bool))
+        return obs, masked_info(info, mask)
 
     def step(self, actions: np.ndarray) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict]:
         mode = self.metadata["autoreset_mode"]
@@ -119,18 +130,17 @@ class CraftaxVectorEnv(VectorEnv):
                 reward[restart], terminated[restart], truncated[restart] = 0.0, False, False
                 info = _merge(info, reset_info, restart)
             self._ended = terminated | truncated
-            return obs, reward, terminated, truncated, _masked(info, every)
+            return obs, reward, terminated, truncated, masked_info(info, every)
         ended = terminated | truncated
         if mode == AutoresetMode.DISABLED or not ended.any():
             self._ended = ended
-            return obs, reward, terminated, truncated, _masked(info, every)
+            return obs, reward, terminated, truncated, masked_info(info, every)
         final_obs = np.full(self.num_envs, None, object)
         for i in np.flatnonzero(ended):
             final_obs[i] = _rows(obs, i)
         obs, reset_info = self.batch.reset(ended)
-        out = _masked(_merge(info, reset_info, ended), every)
-        final_info = {k: np.where(_rows_mask(ended, v), v, 0) for k, v in info.items()}
-        out.update(final_obs=final_obs, _final_obs=ended, final_info=_masked(final_info, ended),
+        out = masked_info(_merge(info, reset_info, ended), every)
+        out.update(final_obs=final_obs, _final_obs=ended, final_info=masked_info(info, ended),
                    _final_info=ended)
         return obs, reward, terminated, truncated, out
 
@@ -138,10 +148,6 @@ class CraftaxVectorEnv(VectorEnv):
         if self.render_mode != "rgb_array":
             return None
         return tuple(self.batch.frames())
-
-
-def _rows_mask(mask: np.ndarray, like: np.ndarray) -> np.ndarray:
-    return mask.reshape((-1,) + (1,) * (like.ndim - 1))
 
 
 def _merge(info: dict, reset_info: dict, mask: np.ndarray) -> dict:

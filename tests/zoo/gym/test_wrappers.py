@@ -108,6 +108,19 @@ def test_vector_cclip_reward_batches_and_restarts(vector, cclip):
             similarity(cclip, [frames[-1][i]] * 6), abs=1e-4)
 
 
+def test_vector_wrapper_masked_reset_marks_only_the_reset_envs(vector, cclip):
+    """A masked reset's wrapper info is marked as the env's is (Gymnasium's ``_key`` masks): only
+    the reset env, its new window's similarity, zeros in the running env's rows."""
+    env = VectorCClipReward(vector, TEXT, cclip)
+    env.reset(seed=0)
+    mask = np.array([False, True])
+    obs, info = env.reset(options={"reset_mask": mask})
+    for key in ("episode_index", "cclip_reward", "cclip_similarity"):
+        assert info[f"_{key}"].tolist() == [False, True], key
+    assert info["cclip_similarity"][0] == 0
+    assert info["cclip_similarity"][1] == pytest.approx(similarity(cclip, [obs[1]] * 6), abs=1e-4)
+
+
 def test_cvpt_features_are_one_pass_over_the_episode(cvpt):
     env = CVPTFeatures(CrafterDojoEnv("crafter"), cvpt)
     assert env.observation_space.shape == (cvpt.config.d_model,)

@@ -23,7 +23,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from gymnasium.vector.utils import batch_space
 
 from zoo.envs.schema import FRAME_SHAPE
-from zoo.gym.vector import reset_mask
+from zoo.gym.vector import masked_info, reset_mask
 
 SHIPPED = Path(__file__).resolve().parents[3] / "weights"
 """The repository's shipped exports (weights/README.md), the wrappers' default models."""
@@ -127,7 +127,7 @@ class VectorModelWrapper(VectorWrapper):
         zeros = np.zeros(self.num_envs, np.float32)
         obs, _, extra = self.model.observe(obs, zeros, mask, _seeds(info, True), mask)
         self._ended[mask] = False
-        return obs, _with_masks(info, extra, self._every)
+        return obs, {**info, **masked_info(extra, mask)}
 
     def step(self, actions: Any):
         obs, reward, terminated, truncated, info = self.env.step(actions)
@@ -136,11 +136,4 @@ class VectorModelWrapper(VectorWrapper):
             obs, np.asarray(reward, np.float32), starts, _seeds(info, True), self._every
         )
         self._ended = np.asarray(terminated) | np.asarray(truncated)
-        return obs, reward, terminated, truncated, _with_masks(info, extra, self._every)
-
-
-def _with_masks(info: dict, extra: dict, mask: np.ndarray) -> dict:
-    out = dict(info)
-    for key, value in extra.items():
-        out[key], out[f"_{key}"] = value, mask
-    return out
+        return obs, reward, terminated, truncated, {**info, **masked_info(extra, self._every)}
