@@ -22,7 +22,8 @@ from zoo.envs.schema import FRAME_SHAPE, STATE_FIELDS, State
 RENDERERS = ("numba", "jax")
 RENDERER_ENV = "ZOO_RENDERER"
 NUMBA_RENDERER_VERSION = 1
-"""Bumped whenever the kernel's pixels could change (recorded in rendered shards)."""
+"""Bumped whenever the kernel's pixels could change (recorded in rendered shards). numba's
+compiled cache needs no bump: its entries are keyed on all the kernel's sources (``cache``)."""
 STATE_INPUTS = (
     "map", "player_pos", "player_dir", "player_vitals", "player_sleeping", "inventory",
     "light_level", "arrows_dir",

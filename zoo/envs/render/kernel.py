@@ -16,6 +16,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from zoo.envs.render.cache import njit_cached
 from zoo.envs.render.llvm import wide_vectors
 from zoo.envs.render.noise import uniform
 from zoo.envs.render.shade import blend_player, blend_sprite, copy_tile, shade
@@ -43,7 +44,7 @@ def _on_screen(positions, status, m, row, col):
     return i, j, status[m, 0] != 0 and 0 <= i < VIEW[0] and 0 <= j < VIEW[1]
 
 
-@numba.njit(cache=True)
+@njit_cached()
 def _mark_mobs(marked, positions, status, row, col):
     for m in range(positions.shape[0]):
         i, j, drawn = _on_screen(positions, status, m, row, col)
@@ -51,7 +52,7 @@ def _mark_mobs(marked, positions, status, row, col):
             marked[i, j] = True
 
 
-@numba.njit(cache=True)
+@njit_cached()
 def _draw_mobs(tiles, slots, sprites, alphas, row, col, positions, status, arrow_dir, kind):
     for m in range(positions.shape[0]):
         i, j, drawn = _on_screen(positions, status, m, row, col)
@@ -64,7 +65,7 @@ def _draw_mobs(tiles, slots, sprites, alphas, row, col, positions, status, arrow
         blend_sprite(tiles[slots[i, j]], sprites[sprite], alphas[sprite])
 
 
-@numba.njit(cache=True)
+@njit_cached()
 def _view(ids, map_, row, col):
     """Block ids of the 7x9 tiles around (row, col); outside the map Craftax pads with
     OUT_OF_BOUNDS (1); ids past the last block draw black (NUM_BLOCKS)."""
@@ -77,7 +78,7 @@ def _view(ids, map_, row, col):
                 ids[i, j] = min(np.int64(map_[r, c]), NUM_BLOCKS)
 
 
-@numba.njit(cache=True)
+@njit_cached()
 def _draw_inventory(words, cells, origin, counts):
     """The panel below the map; words: the frame as (144, 54) uint64, cells: (16, 2, 10,
     16, 6) uint64 (each cell's 16 rows of 48 bytes)."""
@@ -90,7 +91,7 @@ def _draw_inventory(words, cells, origin, counts):
         copy_tile(words, top, WORDS * col, cell)
 
 
-@numba.njit(cache=True, nogil=True)  # nogil: generation re-renders on its encoder thread
+@njit_cached(nogil=True)  # nogil: generation re-renders on its encoder thread
 def render_batch(out, blocks, player, player_alpha, sprites, sprite_alpha, intensity,
                  half_tint, cells, cell_origin, maps, player_pos, player_dir, sleeping,
                  light, counts, zombies_pos, zombies_status, cows_pos, cows_status,

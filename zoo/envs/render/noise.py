@@ -13,6 +13,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from zoo.envs.render.cache import njit_cached
 from zoo.envs.render.llvm import wide_vectors
 
 _PARITY = np.uint32(0x1BD11BDA)  # threefry's key-schedule constant
@@ -37,7 +38,7 @@ def _four_rounds(x0, x1, r0, r1, r2, r3):
     return x0, x1
 
 
-@numba.njit(cache=True)
+@njit_cached()
 def uniform(k0: np.uint32, k1: np.uint32, out: np.ndarray) -> None:
     """Fill the flat float32 ``out`` (< 2**32 values) with JAX's uniform [0, 1) draws for the
     threefry key (k0, k1), in JAX's order."""

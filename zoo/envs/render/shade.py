@@ -18,6 +18,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from zoo.envs.render.cache import njit_cached
 from zoo.envs.render.llvm import fma, wide_vectors
 from zoo.envs.render.textures import BLOCK
 
@@ -46,7 +47,7 @@ def _to_uint8(x):
     return np.uint8(min(max(np.int32(np.rint(x)), 0), 255))
 
 
-@numba.njit(cache=True)
+@njit_cached()
 def blend_player(tile, texture, alpha):
     """map x (1 - a) + texture x a, the first product fused (XLA's choice here)."""
     wide_vectors()
@@ -56,7 +57,7 @@ def blend_player(tile, texture, alpha):
             tile[ch, k] = fma(tile[ch, k], ONE - a, texture[ch, k] * a)
 
 
-@numba.njit(cache=True)
+@njit_cached()
 def blend_sprite(tile, texture, alpha):
     """(1 - a) x map + texture x a, the second product fused (XLA's choice here)."""
     wide_vectors()
