@@ -16,7 +16,8 @@ stop-gradient. How often the optimizer steps is ``update_every``:
 
 With sequences of ``tbptt_len`` steps (the CPU recipes) the two are the same. The module steps
 its optimizer itself (Lightning's manual optimization), so gradient clipping is the module's
-``max_grad_norm`` (the paper's "Max Grad Norm"), not ``trainer.gradient_clip_val``, and the LR
+``max_grad_norm`` (the paper's "Max Grad Norm", applied in ``on_before_optimizer_step`` where
+the gradients are unscaled), not ``trainer.gradient_clip_val``, and the LR
 schedule advances once per optimizer step; ``trainer.global_step`` and ``trainer.max_steps``
 count optimizer steps in both modes.
 
@@ -140,17 +141,23 @@ class SequenceBC(L.LightningModule):
         return loss_sum / (actions != IGNORE_ACTION).sum().clamp(min=1)
 
     def _optimizer_step(self, loss: torch.Tensor) -> None:
-        """Backward ``loss``, clip to ``max_grad_norm``, step the optimizer and the schedule."""
+        """Backward ``loss`` from zeroed gradients, step the optimizer (which clips, in
+        ``on_before_optimizer_step``) and the schedule."""
         optimizer = self.optimizers()
         optimizer.zero_grad(set_to_none=True)
         self.manual_backward(loss)
+        optimizer.step()
+        self.lr_schedulers().step()
+
+    def on_before_optimizer_step(self, optimizer: torch.optim.Optimizer) -> None:
+        """Clip to ``max_grad_norm`` here: under ``16-mixed`` Lightning unscales the gradients
+        just before this hook, so a clip before ``optimizer.step()`` would see them scaled
+        (by 65,536 at first) and shrink the true step by that factor."""
         if self.hparams.max_grad_norm is not None:
             self.clip_gradients(
                 optimizer, gradient_clip_val=self.hparams.max_grad_norm,
                 gradient_clip_algorithm="norm",
             )
-        optimizer.step()
-        self.lr_schedulers().step()
 
     def _out_of_steps(self) -> bool:
         """True once ``trainer.max_steps`` optimizer steps are done (a batch may end early)."""
@@ -189,6 +196,7 @@ class SequenceBC(L.LightningModule):
             self._optimizer_step(loss)
             logits, loss = logits.detach(), loss.detach()
         batch_size = actions.shape[0]
+        self._log_optimizer_step()
         self.log("train/loss", loss, prog_bar=True, batch_size=batch_size)
         self.log("train/lr", self.lr_schedulers().get_last_lr()[0], batch_size=batch_size)
         if actions.shape[1]:
@@ -196,10 +204,18 @@ class SequenceBC(L.LightningModule):
             self.log_dict(metrics, batch_size=batch_size)
         return loss
 
+    def _log_optimizer_step(self) -> None:
+        """Put this step's curves on the optimizer-step axis (``trainer.global_step``, which
+        OnlineEvaluation's ``online/*`` use): a logged "step" is the x value Lightning hands
+        the logger. Without it ``train/*`` and ``val/*`` sit at batches, 10x to the left of
+        ``online/*`` at the paper's 10 windows per batch."""
+        self.log("step", float(self.global_step), batch_size=1)
+
     def _eval_step(
         self, batch: dict[str, torch.Tensor], stage: str, metrics: MetricCollection
     ) -> torch.Tensor:
         """Log the loss and update the metrics of one evaluation batch; its logits."""
+        self._log_optimizer_step()
         actions = batch["actions"]
         logits = self.batch_logits(batch)
         loss = self._loss(logits, actions)
