@@ -7,7 +7,11 @@ at a time there, runs its tests with the copy first on ``PYTHONPATH`` and record
 
 - ``killed``: the tests failed (pytest exit 1); ``killed_by`` lists the failing tests;
 - ``survived``: they passed, so the suite cannot see this bug;
-- ``error``: pytest could not run them (exit 2-5: a bad node id, no tests, a crash).
+- ``error``: pytest could not run them (exit 2-5: a bad node id, no tests, a crash);
+- ``stale``: (only with ``--skip-stale``) the source no longer holds ``old``.
+
+``--root DIR --whole-files`` replays the table on another checkout (e.g. a ``git worktree`` of
+an older commit) with whole test files instead of node ids, to show what its suite caught.
 
 Before the mutations it runs the same tests on the unmutated copy (``--no-baseline`` skips
 this): a test that fails on main would "kill" every mutation and mean nothing.
@@ -32,7 +36,7 @@ import tempfile
 import time
 import tomllib
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from queue import Queue
 
@@ -97,25 +101,27 @@ def apply(tree: Path, mutation: Mutation) -> str:
     return text
 
 
-def copy_tree(dest: Path) -> Path:
-    """The files git tracks or would track (no .venv, no data) under ``dest``."""
+def copy_tree(dest: Path, root: Path = ROOT) -> Path:
+    """The files git tracks or would track in ``root`` (no .venv, no data) under ``dest``."""
     listed = subprocess.run(
-        ["git", "ls-files", "-co", "--exclude-standard", "-z"], cwd=ROOT, check=True,
+        ["git", "ls-files", "-co", "--exclude-standard", "-z"], cwd=root, check=True,
         capture_output=True,
     ).stdout.decode().split("\0")
     for rel in filter(None, listed):
-        src = ROOT / rel
+        src = root / rel
         if src.is_file():
             (dest / rel).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(src, dest / rel)
     return dest
 
 
-def run_tests(tree: Path, tests: tuple[str, ...], timeout: float) -> tuple[int, str]:
-    """pytest on ``tests`` inside ``tree``, with the copy's packages imported first."""
+def run_tests(tree: Path, tests: tuple[str, ...], timeout: float,
+              marks: str = "") -> tuple[int, str]:
+    """pytest on ``tests`` inside ``tree``, with the copy's packages imported first; ``marks``
+    selects (default "": every named test, ``slow`` ones included)."""
     env = {**os.environ, "PYTHONPATH": str(tree), "PYTHONDONTWRITEBYTECODE": "1"}
     cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-rfE", "-p", "no:cacheprovider",
-           "-m", "", *tests]
+           "-m", marks, *tests]
     try:
         done = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True,
                               timeout=timeout)
@@ -124,11 +130,14 @@ def run_tests(tree: Path, tests: tuple[str, ...], timeout: float) -> tuple[int, 
     return done.returncode, done.stdout + done.stderr
 
 
-def mutate_one(tree: Path, mutation: Mutation, timeout: float) -> Outcome:
+def mutate_one(tree: Path, mutation: Mutation, timeout: float, marks: str = "") -> Outcome:
+    if not mutation.tests:  # an older checkout without the test files
+        return Outcome(mutation.name, mutation.file, mutation.why, [], "survived",
+                       detail="no test file of this checkout is named")
     start = time.perf_counter()
     original = apply(tree, mutation)
     try:
-        rc, output = run_tests(tree, mutation.tests, timeout)
+        rc, output = run_tests(tree, mutation.tests, timeout, marks)
     finally:
         (tree / mutation.file).write_text(original)
     status = {0: "survived", 1: "killed"}.get(rc, "error")
@@ -140,43 +149,66 @@ def mutate_one(tree: Path, mutation: Mutation, timeout: float) -> Outcome:
     )
 
 
-def baseline(tree: Path, mutations: list[Mutation], timeout: float) -> None:
+def baseline(tree: Path, mutations: list[Mutation], timeout: float, marks: str = "") -> None:
     """Refuse to run when the tests fail on the unmutated tree."""
     tests = tuple(dict.fromkeys(t for m in mutations for t in m.tests))
-    rc, output = run_tests(tree, tests, timeout * 4)
+    if not tests:
+        return
+    rc, output = run_tests(tree, tests, timeout * 4, marks)
     if rc != 0:
         raise RuntimeError(f"the mutations' tests fail on the unmutated tree (exit {rc}):\n"
                            f"{output[-3000:]}")
 
 
+def _stale(tree: Path, mutations: list[Mutation], skip: bool) -> list[Mutation]:
+    """Those whose ``old`` text ``tree`` lacks; raise on the first unless ``skip``."""
+    stale = []
+    for m in mutations:
+        path = tree / m.file
+        try:
+            original = apply(tree, m)
+        except (ValueError, FileNotFoundError):
+            if not skip:
+                raise
+            stale.append(m)
+            continue
+        path.write_text(original)
+    return stale
+
+
 def run(mutations: list[Mutation], jobs: int = 2, timeout: float = 600.0,
-        check_baseline: bool = True) -> list[Outcome]:
-    """Each mutation in its own run, ``jobs`` at a time, each worker in its own copy."""
+        check_baseline: bool = True, root: Path = ROOT, skip_stale: bool = False,
+        marks: str = "") -> list[Outcome]:
+    """Each mutation in its own run, ``jobs`` at a time, each worker in its own copy of
+    ``root``; ``marks`` as in ``run_tests``."""
     with tempfile.TemporaryDirectory(prefix="zoo-mutations-") as tmp:
         trees: Queue[Path] = Queue()
-        first = copy_tree(Path(tmp) / "0")
-        for i in range(1, max(1, min(jobs, len(mutations)))):
+        first = copy_tree(Path(tmp) / "0", root)
+        stale = _stale(first, mutations, skip_stale)  # before any test runs
+        live = [m for m in mutations if m not in stale]
+        for i in range(1, max(1, min(jobs, len(live)))):
             trees.put(Path(shutil.copytree(first, Path(tmp) / str(i))))
         trees.put(first)
-        for m in mutations:  # a stale `old` fails before any test runs
-            apply(first, m)
-            (first / m.file).write_text((ROOT / m.file).read_text())
-        if check_baseline:
-            baseline(first, mutations, timeout)
+        if check_baseline and live:
+            baseline(first, live, timeout, marks)
 
         def work(mutation: Mutation) -> Outcome:
             tree = trees.get()
             try:
-                return mutate_one(tree, mutation, timeout)
+                return mutate_one(tree, mutation, timeout, marks)
             finally:
                 trees.put(tree)
 
         with ThreadPoolExecutor(max_workers=trees.qsize()) as pool:
-            return list(pool.map(work, mutations))
+            done = dict(zip(live, pool.map(work, live)))
+    return [done.get(m) or Outcome(m.name, m.file, m.why, list(m.tests), "stale",
+                                   detail="the source lacks the mutation's `old` text")
+            for m in mutations]
 
 
 def report(outcomes: list[Outcome]) -> dict:
-    counts = {s: sum(o.status == s for o in outcomes) for s in ("killed", "survived", "error")}
+    counts = {s: sum(o.status == s for o in outcomes)
+              for s in ("killed", "survived", "error", "stale")}
     return {**counts, "total": len(outcomes), "mutations": [asdict(o) for o in outcomes]}
 
 
@@ -190,6 +222,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-baseline", action="store_true",
                         help="skip running the tests on the unmutated tree first")
     parser.add_argument("--out", type=Path, default=RESULTS, help="JSON table to write")
+    parser.add_argument("--root", type=Path, default=ROOT,
+                        help="checkout to mutate (default: this one)")
+    parser.add_argument("--whole-files", action="store_true",
+                        help="run the named tests' whole files, slow tests left out (for an older --root)")
+    parser.add_argument("--skip-stale", action="store_true",
+                        help="record mutations whose text the source lacks as stale")
     args = parser.parse_args(argv)
     mutations = load(args.files or sorted(MUTANTS.glob("*.toml")))
     if args.only:
@@ -201,7 +239,13 @@ def main(argv: list[str] | None = None) -> int:
         mutations = [m for m in mutations if m.fast]
     if not mutations:
         raise SystemExit("no mutations selected")
-    outcomes = run(mutations, args.jobs, args.timeout, not args.no_baseline)
+    root = args.root.resolve()
+    if args.whole_files:  # the files that exist there, as its default suite runs them
+        mutations = [replace(m, tests=tuple(dict.fromkeys(
+            f for f in (t.split("::")[0] for t in m.tests) if (root / f).exists())))
+            for m in mutations]
+    outcomes = run(mutations, args.jobs, args.timeout, not args.no_baseline, root,
+                   args.skip_stale, "not slow" if args.whole_files else "")
     table = report(outcomes)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(table, indent=1) + "\n")
