@@ -102,6 +102,26 @@ def test_sequences_are_the_filtered_steps_in_order(crafterplay: Path) -> None:
     assert ((noop_runs == 0) | (noop_runs >= 20)).all()
 
 
+def test_min_noop_run_sets_the_shortest_noop_run_kept(crafterplay: Path) -> None:
+    """``min_noop_run: 3``: every step the data module yields is a non-noop or a noop of a run
+    of at least 3 (never a sleeping step), and every such step is yielded: the runs of 3-19
+    noops the paper's default of 20 drops are kept."""
+    module = _module(crafterplay, seq_len=1, batch_size=1, val_fraction=0.99, test_fraction=0.0,
+                     min_noop_run=3)
+    got = [(int(b["episode"][0, 0]), int(b["step"][0, 0])) for b in module.dataset("val")]
+    expected, short_runs = [], 0
+    for chunk in iter_chunks(list_shards(crafterplay)):
+        episode = chunk["meta"]["episode"]
+        if episode_split(episode, 0.99, 0.0) != "val":
+            continue
+        noop, run = chunk["noop"].astype(bool), chunk["noop_run"]
+        keep = (~noop | (run >= 3)) & ~chunk["state"]["player_sleeping"].astype(bool)
+        expected += [(episode, chunk["meta"]["offset"] + int(i)) for i in np.flatnonzero(keep)]
+        short_runs += int((noop & (run >= 3) & (run < 20)).sum())
+    assert short_runs > 0, "the data holds no noop run of 3-19 steps: the test shows nothing"
+    assert got == expected
+
+
 def test_workers_read_different_shards(crafterplay: Path) -> None:
     kwargs = dict(seq_len=4, noop_filter=False, val_fraction=0.0, test_fraction=0.0, shuffle_buffer=0)
 

@@ -35,11 +35,9 @@ def _all_goals(embeddings: Path) -> dict[int, dict[str, np.ndarray]]:
     return out
 
 
-def test_batches_carry_goals_from_the_same_episode_within_the_gap(
-    steve_play: Path, steve_embeddings: Path
-) -> None:
-    batches = _batches(_module(steve_play, steve_embeddings))
-    stored = _all_goals(steve_embeddings)
+def _assert_goals_of_their_episodes(batches: list[dict], stored: dict) -> None:
+    """Every step's goal is its own episode's clip at its goal step, 0..MAX_GAP-1 steps ahead
+    (zeros where it has none)."""
     assert batches
     for batch in batches:
         b, s = batch["actions"].shape
@@ -53,6 +51,70 @@ def test_batches_carry_goals_from_the_same_episode_within_the_gap(
                 assert goal_step < len(stored[episode]["goal"]), "goal outside its episode"
                 expected = stored[episode]["goal"][goal_step] if batch["goal_mask"][i, t] else 0
                 np.testing.assert_array_equal(batch["goal"][i, t].numpy(), expected)
+
+
+def test_batches_carry_goals_from_the_same_episode_within_the_gap(
+    steve_play: Path, steve_embeddings: Path
+) -> None:
+    _assert_goals_of_their_episodes(
+        _batches(_module(steve_play, steve_embeddings)), _all_goals(steve_embeddings)
+    )
+
+
+@pytest.fixture(scope="module")
+def chunked(steve_cclip: Path, tmp_path_factory) -> tuple[Path, Path]:
+    """3 random-expert episodes of up to 60 steps in chunks of 16, and their embeddings."""
+    play, embed = tmp_path_factory.mktemp("chunked_play"), tmp_path_factory.mktemp("chunked_embed")
+    assert main(["data", "generate", "--expert", "random", "--env", "crafter", "--episodes", "3",
+                 "--episodes-per-shard", "2", "--chunk-length", "16", "--max-steps", "60",
+                 "--seed", "1", "--out", str(play), "--no-progress"]) == 0
+    assert main(["goals", "embed", "--checkpoint", str(steve_cclip), "--src", str(play),
+                 "--out", str(embed), "--no-progress"]) == 0
+    return play, embed
+
+
+def test_later_chunks_of_an_episode_get_the_goals_of_their_own_steps(
+    chunked: tuple[Path, Path],
+) -> None:
+    """An episode read in several chunks: the goals attached to its 2nd, 3rd... chunk are
+    those of that chunk's steps, not of the episode's first steps."""
+    play, embed = chunked
+    batches = _batches(_module(play, embed))
+    assert int(torch.cat([b["step"] for b in batches]).max()) >= 32  # a third chunk was read
+    _assert_goals_of_their_episodes(batches, _all_goals(embed))
+
+
+@pytest.mark.parametrize("uncond_prob", [0.0, 1.0])
+def test_uncond_prob_sets_which_steps_go_without_a_goal(
+    steve_play: Path, steve_embeddings: Path, uncond_prob: float
+) -> None:
+    """Per piece (the default): with 0 every step keeps its goal, with 1 none has one (its goal
+    is zeros, the input of the unconditional policy guidance subtracts)."""
+    batches = _batches(_module(steve_play, steve_embeddings, uncond_prob=uncond_prob))
+    mask = torch.cat([b["goal_mask"].flatten() for b in batches])
+    goal = torch.cat([b["goal"].flatten(0, 1) for b in batches])
+    assert len(mask) > 0
+    if uncond_prob == 0.0:
+        assert mask.all() and (goal != 0).any(dim=1).all()
+    else:
+        assert not mask.any() and (goal == 0).all()
+
+
+def test_uncond_prob_is_the_share_of_pieces_without_a_goal(
+    steve_play: Path, steve_embeddings: Path
+) -> None:
+    """0.5 per piece: about half the relabelled pieces (runs of one goal step) have no goal."""
+    batches = _batches(_module(steve_play, steve_embeddings, uncond_prob=0.5))
+    pieces = conditioned = 0
+    for batch in batches:
+        for steps, mask in zip(batch["goal_step"], batch["goal_mask"]):
+            starts = torch.ones_like(steps, dtype=torch.bool)
+            starts[1:] = steps[1:] != steps[:-1]
+            pieces += int(starts.sum())
+            conditioned += int(mask[starts].sum())
+    assert pieces > 100
+    # ~240 pieces: the binomial std of the share is ~0.03
+    assert 0.3 < conditioned / pieces < 0.7
 
 
 def test_goals_follow_the_seed_and_change_with_the_epoch(

@@ -13,9 +13,11 @@ import torch
 
 from zoo.agents.dagger import DaggerMixture
 from zoo.cli import main
-from zoo.data.reader import iter_episodes
+from zoo.data.generate import generate
+from zoo.data.reader import iter_episodes, list_shards
+from zoo.data.shard_generator import DaggerSettings, GenerationConfig
 from zoo.envs.base import Step
-from zoo.envs.constants import NUM_ACTIONS
+from zoo.envs.constants import NUM_ACTIONS, Action
 from zoo.experts.scripted import ScriptedExpert
 from zoo.models.cclip import CCLIPConfig, CCLIPModel
 from zoo.models.cvpt import CVPTConfig, CVPTModel
@@ -279,3 +281,38 @@ def test_goal_directed_dagger_cli_names_what_is_missing(
     with pytest.raises(SystemExit):
         main([*_dagger_argv(learner, tmp_path / "c"), "--cclip", str(steve_learner["cclip"])])
     assert "--cclip apply to a C-Steve-1 learner" in capsys.readouterr().err
+
+
+IDLE = int(Action.NOOP)
+
+
+def _idle_learner(label: int):
+    """A build_agent: the learner always idles (NOOP), the expert always labels ``label``."""
+
+    def build(config: GenerationConfig, num_envs: int) -> DaggerMixture:
+        return DaggerMixture(
+            ConstantAgent(IDLE, num_envs), ConstantAgent(label, num_envs), num_envs, 0.0, "step"
+        )
+
+    return build
+
+
+@pytest.mark.parametrize(("label", "noop"), [(int(Action.MOVE_LEFT), False), (IDLE, True)])
+def test_an_idle_learner_is_a_noop_only_where_the_expert_would_idle_too(
+    tmp_path: Path, label: int, noop: bool
+) -> None:
+    """The learner plays NOOP at every step (beta 0), so every played step had no effect.
+    Labelled MOVE_LEFT, no stored step is a noop: the noop filter must keep the expert's way
+    out of the idle states. Labelled NOOP, every step is one (the played and the stored action
+    agree and did nothing)."""
+    config = GenerationConfig(
+        expert="scripted", episodes=1, seed=0, env="crafter", episodes_per_shard=1,
+        chunk_length=16, max_steps=30,
+        dagger=DaggerSettings("idle", "0" * 64, 1.0, 0.0, "step"),
+    )
+    generate(config, tmp_path, progress=False, build_agent=_idle_learner(label))
+    (episode,) = iter_episodes(list_shards(tmp_path))
+    acted = episode["actions"] >= 0  # the final observation has no action
+    assert acted.sum() == 30 and (episode["actions"][acted] == label).all()
+    assert (episode["noop"][acted] == noop).all()
+    assert not episode["noop"][~acted].any()

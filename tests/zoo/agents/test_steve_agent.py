@@ -137,6 +137,22 @@ def test_guidance_scale_zero_is_the_conditional_policy() -> None:
     assert not torch.allclose(guided_logits, plain_logits)
 
 
+def test_guided_logits_are_the_conditional_ones_pushed_away_from_the_unconditional() -> None:
+    """The paper's guidance at scale 1.5: logits = cond + 1.5 (cond - uncond), with cond and
+    uncond from two plain passes of the network, with the goal and with the zero goal."""
+    policy = _policy(cfg_scale=1.5)
+    goal = torch.randn(2, 64, generator=torch.Generator().manual_seed(3))
+    frames = _step(2, seed=4).frames
+    guided, _ = policy.logits(frames, goal, policy.initial_state(2))
+    model, x = policy.model, torch.tensor(frames).unsqueeze(1)
+    first = torch.zeros(2, 1, dtype=torch.bool)
+    with torch.no_grad():
+        cond = model(x, first, goal.unsqueeze(1), model.initial_state(2))[0][:, 0]
+        uncond = model(x, first, torch.zeros(2, 1, 64), model.initial_state(2))[0][:, 0]
+    assert (cond - uncond).abs().max() > 0.1  # the goal matters, so the test can tell
+    torch.testing.assert_close(guided, cond + 1.5 * (cond - uncond), rtol=1e-4, atol=1e-4)
+
+
 def test_one_feature_pass_gives_the_guided_logits_over_several_steps() -> None:
     """PPO-Steve reads the goal-free feature and then acts towards a caption: the two halves of
     the feature API must give ``logits``' guided logits, step after step, memory carried."""

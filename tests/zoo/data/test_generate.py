@@ -297,6 +297,24 @@ def test_resume_after_kill_gives_the_same_dataset(craftax_dataset, craftax_gener
     assert _finished_episodes(tmp_path) == [0, 1, 2]
 
 
+def test_a_rerun_removes_the_leftovers_of_a_killed_run(crafter_dataset, tmp_path):
+    """The run dies after its first shard, leaving a half-written shard and an episode work
+    folder; the rerun finishes the other shard and leaves exactly the uninterrupted files."""
+
+    def crash(entry):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        generate(CRAFTER, tmp_path, num_envs=2, progress=False, after_shard=crash,
+                 build_agent=dataset_agent)
+    assert [e["index"] for e in load_manifest(tmp_path)["shards"]] == [0]
+    (tmp_path / "crafterplay-000001.tar.tmp-999").write_bytes(b"partial")
+    (tmp_path / ".work-000001-999").mkdir()
+    (tmp_path / ".work-000001-999" / "episode-000002.part").write_bytes(b"partial")
+    generate(CRAFTER, tmp_path, num_envs=2, progress=False, build_agent=dataset_agent)
+    _assert_same_dataset(tmp_path, crafter_dataset)
+
+
 def test_damaged_shard_is_regenerated(crafter_dataset, tmp_path):
     root = tmp_path / "copy"
     shutil.copytree(crafter_dataset, root)

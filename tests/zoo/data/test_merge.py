@@ -55,3 +55,18 @@ def test_merge_names_missing_shards_and_a_bad_range_is_an_error(tmp_path, capsys
     with pytest.raises(SystemExit):
         main([*GEN, "--shards", "7:9", "--out", str(tmp_path / "x")])
     assert "holds none of the dataset's shards 0:3" in capsys.readouterr().err
+
+
+def test_merge_refuses_a_shard_that_fails_its_checksum(tmp_path, capsys) -> None:
+    """A job's shard damaged after it was written (a flipped byte): merging its folder is
+    refused, naming the shard, and nothing is merged."""
+    job = tmp_path / "job"
+    assert main([*GEN, "--shards", "2:", "--out", str(job)]) == 0
+    shard = job / "crafterplay-000002.tar"
+    data = bytearray(shard.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    shard.write_bytes(bytes(data))
+    capsys.readouterr()
+    assert main(["data", "merge", str(job), "--out", str(tmp_path / "m")]) == 2
+    assert f"{shard}: sha256 differs from its manifest" in capsys.readouterr().err
+    assert not (tmp_path / "m").exists()

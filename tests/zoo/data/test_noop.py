@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from zoo.data.noop import filter_noops, noop_counts, noop_flags, noop_runs
+from zoo.data.sequences import filter_noop_chunks
 from zoo.envs.constants import Achievement, Action, Block, Item, Mob
 from zoo.envs.schema import empty_state
 
@@ -40,6 +41,14 @@ def test_filter_removes_run_of_19_keeps_run_of_20():
     # the only gap is the removed run of 19, just before step 22
     assert np.flatnonzero(out["cut"]).tolist() == [3]
     assert out["noop"].sum() == 20 and out["meta"] == {"episode": 0}
+
+
+def test_the_data_modules_filter_stage_keeps_runs_of_its_min_run():
+    """``min_noop_run`` reaches the filter: with 5, a run of 5 noops stays, one of 4 goes."""
+    noop = np.array([False] * 2 + [True] * 5 + [False] + [True] * 4 + [False], bool)
+    (out,) = filter_noop_chunks([_chunk(noop)], 5)
+    assert out["step_index"].tolist() == [0, 1, 2, 3, 4, 5, 6, 7, 12]
+    assert np.flatnonzero(out["cut"]).tolist() == [8]  # step 12 follows the dropped run
 
 
 def test_filter_cut_flag_at_chunk_start():

@@ -38,6 +38,11 @@ CASES = {
         Action.MAKE_STONE_PICKAXE, A.MAKE_STONE_PICKAXE,
     ),
     "drink": (Block.WATER, {}, Action.DO, A.COLLECT_DRINK),
+    # the sibling of a full tool: its count rises, so the full pickaxe must not be credited
+    "wood_sword_beside_a_full_pickaxe": (
+        Block.TABLE, {Item.WOOD: 3, Item.WOOD_PICKAXE: 9}, Action.MAKE_WOOD_SWORD,
+        A.MAKE_WOOD_SWORD,
+    ),
 }
 
 
@@ -130,3 +135,17 @@ def test_what_the_cap_hides_is_not_guessed():
     prev["player_vitals"][0, 2] = 5
     cur["player_vitals"][0, 2] = 4  # thirst ran over: the counter restarts at 0, no drink
     assert not achievement_events(prev, cur).any()
+
+
+@pytest.mark.parametrize(
+    ("full", "made"), [("wood_pickaxe", "wood_sword"), ("wood_sword", "wood_pickaxe")]
+)
+def test_making_the_sibling_of_a_full_tool_is_that_sibling_alone(full, made):
+    """A wood pickaxe at 9 and 3 wood; a wood sword is made (sword 0 -> 1, wood 3 -> 2). The
+    cap rule credits the full tool only when no tool count rose: here the sword's did, so the
+    event is MAKE_WOOD_SWORD, never also MAKE_WOOD_PICKAXE (and the same the other way)."""
+    prev, cur = _pair(wood=3, **{full: 9})
+    cur["inventory"][0, Item.WOOD] = 2
+    cur["inventory"][0, Item[made.upper()]] = 1
+    events = achievement_events(prev, cur)[0]
+    assert {Achievement(i).name for i in np.flatnonzero(events)} == {f"MAKE_{made.upper()}"}

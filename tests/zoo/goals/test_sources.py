@@ -134,3 +134,19 @@ def test_completed_segments_only_leave_the_others_their_hindsight_goals() -> Non
             np.testing.assert_array_equal(out["goal"][start:stop], goals[start:stop])
     with pytest.raises(ValueError, match="commanded_segments='some'"):
         GoalSourceParams("commanded", 1.0, "caption", "some")
+
+
+def test_hindsight_goals_are_the_clips_of_the_relabelled_goal_steps() -> None:
+    """The paper's example (place table, craft pickaxe, craft sword on steps 2, 3, 4): steps
+    0-2 get the table clip (step 2's row), step 3 the pickaxe's, step 4 the sword's; the
+    unconditional piece (step 5's own) gets zeros. Each row is a step's own clip embedding, so
+    a goal taken from the step itself or from an earlier one shows as another row."""
+    goals = (np.arange(6 * D).reshape(6, D) + 1).astype(np.float16)  # row t: 4t+1 .. 4t+4
+    labels = Relabelling(
+        np.array([2, 2, 2, 3, 4, 5]), np.array([True] * 5 + [False]), np.ones(6, bool)
+    )
+    out = episode_goals(goals, labels, None, GoalSourceParams(), {}, np.random.default_rng(0))
+    expected = np.array([goals[2], goals[2], goals[2], goals[3], goals[4], np.zeros(D)])
+    np.testing.assert_array_equal(out["goal"], expected.astype(np.float16))
+    np.testing.assert_array_equal(out["goal_step"], [2, 2, 2, 3, 4, 5])
+    np.testing.assert_array_equal(out["goal_mask"], [True] * 5 + [False])
