@@ -10,17 +10,31 @@ Measures:
   * cached per-step inference (rolling TrXL memory) against recomputing the whole window of
     memory_len + 1 frames every step (goal >= 5x);
   * parameters and peak resident memory of one training step (forward + backward + AdamW) per
-    preset, each in a fresh process whose peak is reset after the imports (Linux clear_refs).
+    preset, each in a fresh process whose peak is reset after the imports (Linux clear_refs);
+  * a step's anatomy at the recipe's shape (bench/cvpt_profile.py, bench/cvpt_e2e.py): the CPU's
+    fp32/bf16 matmul and conv peaks (``peaks``); the recipe's frames/s under the real `zoo fit`
+    loop against model-only steps in the same run (``end_to_end``); ms per step of each model
+    part, the optimizer, the data-loader wait and Lightning's loop (``profile``); FLOPs per
+    frame and the share of the peaks each setting reaches (``flops``).
 
+The full measurement (every key; ~10 minutes on a quiet 2-core machine), on the recipe's Craftax
+data, with nothing else running:
+  nice -n 10 .venv/bin/python bench/bench_cvpt.py --data data/crafterplay_plantsfirst_cx2k
+A smoke run (tiny step counts; the 8-episode set has no validation episodes at the recipe's 5%,
+hence the override), written outside bench/results:
+  zoo data generate --expert scripted --env crafter --episodes 8 --max-steps 300 --seed 0 \
+      --episodes-per-shard 4 --out data/bench_cvpt_smoke --workers 1
+  .venv/bin/python bench/bench_cvpt.py --quick --data data/bench_cvpt_smoke \
+      --out /tmp/cvpt_smoke.json --e2e-set data.init_args.val_fraction=0.25
+--data defaults to data/crafterplay_smoke:
   zoo data generate --expert random --env crafter --episodes 16 --max-steps 200 --seed 0 \
       --episodes-per-shard 4 --chunk-length 64 --out data/crafterplay_smoke
-  nice -n 10 .venv/bin/python bench/bench_cvpt.py --data data/crafterplay_smoke
-  (or --data data/crafterplay_scripted, the scripted-expert set of configs/cvpt_tiny_cpu.yaml)
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -29,8 +43,11 @@ import sys
 import time
 from pathlib import Path
 
+import cvpt_e2e
+import cvpt_profile
 import numpy as np
 import torch
+import yaml
 
 from datamodules.crafterplay import CrafterPlayDataModule
 from lit_models.cvpt import CVPT
@@ -39,6 +56,30 @@ from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 
 RESULTS = Path(__file__).parent / "results" / "cvpt.json"
+RECIPE = Path("configs/cvpt_tiny_cpu.yaml")
+
+
+@dataclasses.dataclass(frozen=True)
+class Sizes:
+    """How long each measurement runs; ``QUICK`` is the --quick smoke run."""
+
+    steps: int = 6  # timed steps of each training/precision measurement
+    loader_frames: int = 8192
+    inference_steps: int = 30
+    presets: tuple[str, ...] = ("tiny", "base", "large")
+    matmul: tuple[int, ...] = (1024, 2048, 4096)  # square matmul sizes of the peaks
+    repeats: int = 5  # best of this many peak calls
+    model_warmup: int = 3
+    model_steps: int = 20  # model-only steps before `zoo fit` (half as many after it)
+    profiler_steps: int = 3
+    e2e_warmup: int = 10  # `zoo fit` steps left out of the steady state
+    e2e_steps: int = 150
+    e2e_epoch: int = 50  # steps between validations + checkpoints (the recipe: 250)
+
+
+QUICK = Sizes(steps=2, loader_frames=2048, inference_steps=10, presets=("tiny",),
+              matmul=(512, 1024), repeats=2, model_warmup=1, model_steps=3, profiler_steps=1,
+              e2e_warmup=2, e2e_steps=8, e2e_epoch=5)
 
 
 def _datamodule(root: str, seq_len: int, batch_size: int, workers: int) -> CrafterPlayDataModule:
@@ -181,25 +222,88 @@ def preset_memory(name: str, seq_len: int) -> dict:
             "peak_above_imports_mib": _proc_status_mib("VmHWM") - base}
 
 
+def _mean_run(runs: list[dict]) -> dict:
+    """Step-weighted mean of ``ModelOnly.run`` results (before and after `zoo fit`)."""
+    steps = sum(r["steps"] for r in runs)
+    parts = {k: sum(r["parts_s"][k] * r["steps"] for r in runs) / steps for k in runs[0]["parts_s"]}
+    frames = runs[0]["frames_per_s"] * runs[0]["s_per_step"]
+    return {"steps": steps, "s_per_step": parts["total"], "frames_per_s": frames / parts["total"],
+            "parts_s": parts, "frames_per_s_before_after": [r["frames_per_s"] for r in runs]}
+
+
+def step_anatomy(recipe_path: Path, data: str, sizes: Sizes, overrides: list[str]) -> dict:
+    """The peaks, end_to_end, profile and flops keys: the recipe's model and batch shape,
+    model-only steps before and after its `zoo fit` run (load on a shared box drifts)."""
+    recipe = yaml.safe_load(recipe_path.read_text())
+    bf16 = str(recipe["trainer"].get("precision", "")).startswith("bf16")
+    torch.manual_seed(0)
+    module = cvpt_profile.build(recipe["model"])
+    datamodule = cvpt_profile.build(recipe["data"], root=data, sources=None, num_workers=0,
+                                    train_batches_per_epoch=None)
+    batch = next(iter(datamodule.dataset("train")))
+    frames = batch["actions"].numel()
+    counted = cvpt_profile.flops_per_frame(module, batch, bf16)
+    peaks = cvpt_profile.peaks(sizes.matmul, sizes.repeats,
+                               cvpt_profile.encoder_convs(module.model), frames)
+    steps = cvpt_profile.ModelOnly(module, batch, bf16)
+    before = steps.run(sizes.model_steps, sizes.model_warmup)
+    top_ops = cvpt_profile.top_ops(steps.step, sizes.profiler_steps, k=15)
+    threads = torch.get_num_threads()  # one thread: how much the step suffers from sharing cores
+    torch.set_num_threads(1)
+    one_thread = steps.run(max(1, sizes.model_steps // 4), warmup=1)
+    torch.set_num_threads(threads)
+    e2e = cvpt_e2e.run_fit(recipe_path, data, sizes.e2e_warmup, sizes.e2e_steps, sizes.e2e_epoch,
+                           overrides)
+    model_only = _mean_run([before, steps.run(max(1, sizes.model_steps // 2), warmup=0)])
+    e2e |= {"model_only_frames_per_s": model_only["frames_per_s"],
+            "ratio_to_model_only": e2e["frames_per_s"] / model_only["frames_per_s"],
+            "recipe_ratio_to_model_only": e2e["recipe_frames_per_s"] / model_only["frames_per_s"]}
+    profile = {
+        "shape": {"batch": batch["actions"].shape[0], "seq_len": batch["actions"].shape[1],
+                  "px": module.config.frame_size // module.config.input_downsample, "bf16": bf16},
+        "method": "forward: hooks at each part's end; backward: gradient hooks on each part's "
+                  "output (autograd runs the parts' backward in turn); data wait, training "
+                  "batch and loop: `zoo fit` with SimpleProfiler",
+        "model_only": model_only,
+        "model_only_1_thread": one_thread,
+        "lightning_overhead_ms": 1e3 * (e2e["s_per_step"] - model_only["s_per_step"]),
+        "rows": cvpt_profile.profile_rows(model_only["parts_s"], e2e),
+        "top_ops": top_ops,
+    }
+    flops = cvpt_profile.flops_summary(counted, model_only, e2e, peaks)
+    return {"peaks": peaks, "end_to_end": e2e, "profile": profile, "flops": flops}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default="data/crafterplay_smoke")
-    parser.add_argument("--steps", type=int, default=6, help="timed steps per measurement")
+    parser.add_argument("--steps", type=int, help="timed steps per training measurement")
     parser.add_argument("--workers", type=int, default=1, help="DataLoader workers")
+    parser.add_argument("--quick", action="store_true", help="tiny step counts: a smoke run")
+    parser.add_argument("--out", type=Path, default=RESULTS, help="the results JSON")
+    parser.add_argument("--config", type=Path, default=RECIPE, help="the recipe `zoo fit` runs")
+    parser.add_argument("--e2e-steps", type=int, help="timed `zoo fit` steps after the warm-up")
+    parser.add_argument("--e2e-set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a recipe value for `zoo fit` (repeatable), e.g. "
+                             "data.init_args.val_fraction=0.25")
     parser.add_argument("--preset-memory", help=argparse.SUPPRESS)  # child-process mode
     args = parser.parse_args()
     if args.preset_memory:
         print(json.dumps(preset_memory(args.preset_memory, seq_len=16)))
         return
+    sizes = QUICK if args.quick else Sizes()
+    given = {"steps": args.steps, "e2e_steps": args.e2e_steps}
+    sizes = dataclasses.replace(sizes, **{k: v for k, v in given.items() if v is not None})
 
     throughput = {
-        "tiny_144px": training_throughput(args.data, 2, 64, args.steps, 1, args.workers),
-        "tiny_72px": training_throughput(args.data, 8, 64, args.steps, 2, args.workers),
-        "tiny_72px_bf16": training_throughput(args.data, 8, 64, args.steps, 2, args.workers, True),
+        "tiny_144px": training_throughput(args.data, 2, 64, sizes.steps, 1, args.workers),
+        "tiny_72px": training_throughput(args.data, 8, 64, sizes.steps, 2, args.workers),
+        "tiny_72px_bf16": training_throughput(args.data, 8, 64, sizes.steps, 2, args.workers, True),
     }
-    loader = loader_frames_per_s(args.data, seq_len=64, batch_size=8, min_frames=8192)
+    loader = loader_frames_per_s(args.data, seq_len=64, batch_size=8,
+                                 min_frames=sizes.loader_frames)
     presets = {}
-    for name in ("tiny", "base", "large"):
+    for name in sizes.presets:
         out = subprocess.run(
             [sys.executable, __file__, "--preset-memory", name], check=True, capture_output=True, text=True
         )
@@ -210,13 +314,17 @@ def main() -> None:
                     "load_avg_1m": os.getloadavg()[0]},
         "training": throughput,
         "datamodule_alone": loader,
-        "precision_tiny_72px": bf16_vs_fp32(8, 64, args.steps, 2),
-        "inference_tiny": cached_vs_recompute(steps=30, num_envs=1),
+        "precision_tiny_72px": bf16_vs_fp32(8, 64, sizes.steps, 2),
+        "inference_tiny": cached_vs_recompute(steps=sizes.inference_steps, num_envs=1),
         "presets": presets,
+        **step_anatomy(args.config, args.data, sizes, args.e2e_set),
+        "run": {"quick": args.quick, "sizes": dataclasses.asdict(sizes),
+                "load_avg_1m_end": os.getloadavg()[0]},
     }
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(results, indent=2) + "\n")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(results, indent=2) + "\n")
     print(json.dumps(results, indent=2))
+    print(cvpt_profile.table(results))
 
 
 if __name__ == "__main__":

@@ -1,0 +1,101 @@
+"""bench/cvpt_e2e.py and bench/cvpt_profile.py arithmetic on hand-made timestamps."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+
+
+def _load(name: str):
+    spec = importlib.util.spec_from_file_location(name, BENCH / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+cvpt_e2e = _load("cvpt_e2e")
+cvpt_profile = _load("cvpt_profile")
+
+
+def _record() -> dict:
+    """8 steps, epochs of 4: steps end at 0, 1, 2, 3 s, then a 2.5-s validation, a checkpoint
+    and the next epoch's first step end at 6 s (a steady step would end at 4 s), then 7, 8, 9.
+    Each steady step waits 0.1 s for data and spends 0.8 s in Lightning's training batch."""
+    ends = [0.0, 1.0, 2.0, 3.0, 6.0, 7.0, 8.0, 9.0]
+    steps = [{"step": i + 1, "batch_idx": i % 4, "start": end - 0.8, "end": end,
+              "fetch_s": 0.1, "batch_s": 0.8} for i, end in enumerate(ends)]
+    checkpoint = "[Callback]ModelCheckpoint{'monitor': 'val/loss'}.on_validation_end"
+    return {"steps": steps,
+            "validations": [{"after_step": 4, "start": 3.1, "end": 5.6, "batches": 8}],
+            "profiler_totals": {checkpoint: [1, 0.2], "run_training_batch": [8, 6.4]}}
+
+
+def test_steady_steps_leave_out_the_warm_up_and_the_epoch_boundary() -> None:
+    """After 1 warm-up step, the intervals are 1, 1, 3 (boundary), 1, 1, 1: steady 1 s per
+    step, of which 0.1 s data and 0.8 s batch leave 0.1 s of loop; the boundary costs 2 s
+    more, so at 250 steps per epoch a step costs 1 + 2 / 250 s."""
+    out = cvpt_e2e.summarize(_record(), warmup=1, frames_per_step=512, recipe_epoch_steps=250)
+    assert out["steps_timed"] == 5 and out["s_per_step"] == pytest.approx(1.0)
+    assert out["frames_per_s"] == pytest.approx(512.0)
+    assert out["data_wait_s_per_step"] == pytest.approx(0.1)
+    assert out["loop_between_batches_s_per_step"] == pytest.approx(0.1)
+    assert out["epoch_boundary_extra_s"] == pytest.approx(2.0)
+    assert out["validation_s"] == pytest.approx(2.5)
+    assert out["checkpoint_s_per_epoch"] == pytest.approx(0.2)
+    assert out["window"] == {"steps": 6, "seconds": 8.0, "frames_per_s": 6 * 512 / 8.0}
+    assert out["recipe_s_per_step"] == pytest.approx(1.0 + 2.0 / 250)
+
+
+def test_too_few_steps_for_a_steady_state_is_an_error() -> None:
+    record = _record()
+    record["steps"] = record["steps"][:3]
+    with pytest.raises(ValueError, match="warmup"):
+        cvpt_e2e.summarize(record, warmup=1, frames_per_step=512, recipe_epoch_steps=250)
+
+
+def test_the_derived_config_keeps_checkpoints_and_drops_wandb() -> None:
+    """One folder replaces the sources; the epoch is 5 batches per worker; W&B goes, the CSV
+    logger, the checkpoints and everything else stay; --e2e-set values are read as YAML."""
+    recipe = {
+        "trainer": {"precision": "bf16-mixed", "max_steps": 4750, "limit_val_batches": 8,
+                    "logger": [{"class_path": "lightning.pytorch.loggers.WandbLogger"},
+                               {"class_path": "lightning.pytorch.loggers.CSVLogger"}],
+                    "callbacks": [{"class_path": "lightning.pytorch.callbacks.ModelCheckpoint"}]},
+        "data": {"init_args": {"sources": [{"root": "a"}], "num_workers": 2,
+                               "train_batches_per_epoch": 250, "val_fraction": 0.05}},
+    }
+    config = cvpt_e2e.derived_config(recipe, "data/x", 20, 5, "/tmp/r", "/tmp/r/s.json",
+                                     ["data.init_args.val_fraction=0.25"])
+    trainer, data = config["trainer"], config["data"]["init_args"]
+    assert [lg["class_path"].rsplit(".", 1)[1] for lg in trainer["logger"]] == ["CSVLogger"]
+    assert [c["class_path"] for c in trainer["callbacks"]] == [
+        "lightning.pytorch.callbacks.ModelCheckpoint", "cvpt_e2e.StepTimer"]
+    assert trainer["max_steps"] == 20 and trainer["limit_val_batches"] == 8
+    assert data["root"] == "data/x" and data["sources"] is None
+    assert data["train_batches_per_epoch"] == 10 and data["val_fraction"] == 0.25
+    assert recipe["data"]["init_args"]["sources"] == [{"root": "a"}]  # the recipe is untouched
+
+
+def test_an_epoch_gives_each_worker_an_equal_share() -> None:
+    assert cvpt_e2e.epoch_batches(250, 1) == 250
+    assert cvpt_e2e.epoch_batches(250, 0) == 250
+    assert cvpt_e2e.epoch_batches(250, 4) == 248
+
+
+def test_profile_rows_add_up_to_the_step_at_the_recipe_cadence() -> None:
+    """Model parts of 0.5 s in all; `zoo fit` adds 0.1 s data wait, 0.2 s more in its batch,
+    0.1 s of loop and 0.05 s of amortised boundary: the shares sum to one."""
+    parts = dict.fromkeys(cvpt_profile.LABELS, 0.5 / len(cvpt_profile.LABELS)) | {"total": 0.5}
+    e2e = {"data_wait_s_per_step": 0.1, "training_batch_s_per_step": 0.7,
+           "loop_between_batches_s_per_step": 0.1, "s_per_step": 0.9,
+           "recipe_s_per_step": 0.95, "recipe_epoch_steps": 250}
+    rows = cvpt_profile.profile_rows(parts, e2e)
+    assert sum(r["share"] for r in rows) == pytest.approx(1.0)
+    assert sum(r["ms"] for r in rows) == pytest.approx(950.0)
+    assert rows[-3]["ms"] == pytest.approx(200.0)
+    alone = cvpt_profile.profile_rows(parts, None)
+    assert sum(r["share"] for r in alone) == pytest.approx(1.0)
