@@ -44,6 +44,7 @@ import time
 from pathlib import Path
 
 import cvpt_e2e
+import cvpt_levers
 import cvpt_profile
 import numpy as np
 import torch
@@ -274,6 +275,22 @@ def step_anatomy(recipe_path: Path, data: str, sizes: Sizes, overrides: list[str
     return {"peaks": peaks, "end_to_end": e2e, "profile": profile, "flops": flops}
 
 
+def recipe_levers(recipe_path: Path, data: str, quick: bool, compile_model: bool) -> dict:
+    """cvpt_levers.levers on the recipe's model and one batch of ``data``."""
+    recipe = yaml.safe_load(recipe_path.read_text())
+    bf16 = str(recipe["trainer"].get("precision", "")).startswith("bf16")
+    datamodule = cvpt_profile.build(recipe["data"], root=data, sources=None, num_workers=0,
+                                    train_batches_per_epoch=None)
+    batch = next(iter(datamodule.dataset("train")))
+
+    def build(**overrides: object) -> torch.nn.Module:
+        torch.manual_seed(0)
+        return cvpt_profile.build(recipe["model"], **overrides).train()
+
+    return cvpt_levers.levers(build, batch, bf16, steps=3 if quick else 12,
+                              warmup=1 if quick else 2, compile_model=compile_model)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default="data/crafterplay_smoke")
@@ -286,10 +303,20 @@ def main() -> None:
     parser.add_argument("--e2e-set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a recipe value for `zoo fit` (repeatable), e.g. "
                              "data.init_args.val_fraction=0.25")
+    parser.add_argument("--levers-only", action="store_true",
+                        help="measure only the levers (cvpt_levers.py) into --out's `levers`")
+    parser.add_argument("--compile", action="store_true", help="add torch.compile to the levers")
     parser.add_argument("--preset-memory", help=argparse.SUPPRESS)  # child-process mode
     args = parser.parse_args()
     if args.preset_memory:
         print(json.dumps(preset_memory(args.preset_memory, seq_len=16)))
+        return
+    if args.levers_only:
+        results = json.loads(args.out.read_text()) if args.out.exists() else {}
+        results["levers"] = recipe_levers(args.config, args.data, args.quick, args.compile)
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(results, indent=2) + "\n")
+        print(json.dumps(results["levers"], indent=2))
         return
     sizes = QUICK if args.quick else Sizes()
     given = {"steps": args.steps, "e2e_steps": args.e2e_steps}
@@ -318,6 +345,7 @@ def main() -> None:
         "inference_tiny": cached_vs_recompute(steps=sizes.inference_steps, num_envs=1),
         "presets": presets,
         **step_anatomy(args.config, args.data, sizes, args.e2e_set),
+        "levers": recipe_levers(args.config, args.data, args.quick, args.compile),
         "run": {"quick": args.quick, "sizes": dataclasses.asdict(sizes),
                 "load_avg_1m_end": os.getloadavg()[0]},
     }

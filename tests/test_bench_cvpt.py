@@ -1,4 +1,5 @@
-"""bench/cvpt_e2e.py and bench/cvpt_profile.py arithmetic on hand-made timestamps."""
+"""bench/cvpt_e2e.py and bench/cvpt_profile.py arithmetic on hand-made timestamps; the levers of
+bench/cvpt_levers.py compute what they claim to."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ def _load(name: str):
 
 cvpt_e2e = _load("cvpt_e2e")
 cvpt_profile = _load("cvpt_profile")
+cvpt_levers = _load("cvpt_levers")
 
 
 def _record() -> dict:
@@ -99,3 +101,41 @@ def test_profile_rows_add_up_to_the_step_at_the_recipe_cadence() -> None:
     assert rows[-3]["ms"] == pytest.approx(200.0)
     alone = cvpt_profile.profile_rows(parts, None)
     assert sum(r["share"] for r in alone) == pytest.approx(1.0)
+
+
+def _tiny_cvpt():
+    import torch
+
+    from lit_models.cvpt import CVPT
+
+    torch.manual_seed(0)
+    return CVPT(model="tiny", d_model=16, d_ff=32, n_heads=2, n_layers=1,
+                impala_channels=[2, 4, 4], encoder_hidden=16, memory_len=8, input_downsample=2,
+                cosine_steps=10).eval()
+
+
+def test_the_channels_last_lever_is_the_same_model() -> None:
+    """NHWC views into the encoder give the model's own logits (the lever changes speed only)."""
+    import torch
+
+    module = _tiny_cvpt()
+    module.model.to(memory_format=torch.channels_last)
+    g = torch.Generator().manual_seed(0)
+    frames = torch.randint(0, 256, (2, 4, 144, 144, 3), dtype=torch.uint8, generator=g)
+    first = torch.zeros(2, 4, dtype=torch.bool)
+    state = module.model.initial_state(2)
+    with torch.no_grad():
+        want = module.model(frames, first, state)[0]
+        got = cvpt_levers.channels_last_logits(module.model, frames, first, state)
+    torch.testing.assert_close(got, want, atol=1e-5, rtol=1e-5)
+
+
+def test_pre_downsampled_frames_are_the_rounded_2x2_mean() -> None:
+    """A 2x2 block of 1, 2, 3, 4 is stored as round(2.5) = 3 (round half up), in its place."""
+    import torch
+
+    frames = torch.zeros(1, 2, 144, 144, 3, dtype=torch.uint8)
+    frames[0, 1, 2:4, 2:4, 0] = torch.tensor([[1, 2], [3, 4]], dtype=torch.uint8)
+    small = cvpt_levers.pooled({"frames": frames})["frames"]
+    assert small.shape == (1, 2, 72, 72, 3) and small.dtype == torch.uint8
+    assert small[0, 1, 1, 1, 0] == 3 and int(small.sum()) == 3
