@@ -35,12 +35,18 @@ from zoo.gym.batch import downsample
 Step = Callable[[], None]
 
 
-def _optimizer(module: nn.Module, **adamw: object) -> tuple[torch.optim.Optimizer, object]:
-    """The module's own AdamW groups and schedule, with ``adamw`` options added."""
+def lever_optimizer(module: nn.Module, **adamw: object) -> tuple[torch.optim.Optimizer, object]:
+    """The module's own AdamW groups, hyperparameters and schedule, with ``adamw`` options
+    (``foreach``, ``fused``) added. The groups are rebuilt from their params and weight decay
+    alone: a built group carries every default (``foreach: None`` too), which would override
+    the options given here."""
     setup = module.configure_optimizers()
     optimizer, scheduler = setup["optimizer"], setup["lr_scheduler"]["scheduler"]
     if adamw:
-        optimizer = torch.optim.AdamW(optimizer.param_groups, **adamw)
+        groups = [{"params": g["params"], "weight_decay": g["weight_decay"]}
+                  for g in optimizer.param_groups]
+        defaults = {k: optimizer.defaults[k] for k in ("lr", "betas", "eps")}
+        optimizer = torch.optim.AdamW(groups, **defaults, **adamw)
         scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, scheduler.lr_lambdas[0])
     return optimizer, scheduler
 
@@ -72,7 +78,7 @@ def _plain_logits(model: nn.Module, frames: torch.Tensor, first: torch.Tensor,
 def make_step(module: nn.Module, batch: dict[str, torch.Tensor], bf16: bool,
               logits_fn: Callable = _plain_logits, **adamw: object) -> Step:
     """One optimizer step as ``SequenceBC`` takes it per window, on ``batch``."""
-    optimizer, scheduler = _optimizer(module, **adamw)
+    optimizer, scheduler = lever_optimizer(module, **adamw)
     params = [p for group in optimizer.param_groups for p in group["params"]]
     clip = module.hparams.max_grad_norm
     model = module.model

@@ -139,3 +139,16 @@ def test_pre_downsampled_frames_are_the_rounded_2x2_mean() -> None:
     small = cvpt_levers.pooled({"frames": frames})["frames"]
     assert small.shape == (1, 2, 72, 72, 3) and small.dtype == torch.uint8
     assert small[0, 1, 1, 1, 0] == 3 and int(small.sum()) == 3
+
+
+@pytest.mark.parametrize("option", ["foreach", "fused"])
+def test_the_adamw_levers_reach_every_group_with_the_recipes_settings(option: str) -> None:
+    """The lever's AdamW runs its own kernel in every group (a copied group's ``foreach: None``
+    would silently win), with the module's lr, betas and per-group weight decay."""
+    module = _tiny_cvpt()
+    recipe, _ = cvpt_levers.lever_optimizer(module)
+    lever, _ = cvpt_levers.lever_optimizer(module, **{option: True})
+    assert all(g[option] is True for g in lever.param_groups)
+    for a, b in zip(recipe.param_groups, lever.param_groups):
+        assert a["params"] == b["params"] and a["weight_decay"] == b["weight_decay"]
+        assert (a["lr"], a["betas"], a["eps"]) == (b["lr"], b["betas"], b["eps"])
