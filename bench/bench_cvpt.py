@@ -306,6 +306,9 @@ def main() -> None:
     parser.add_argument("--levers-only", action="store_true",
                         help="measure only the levers (cvpt_levers.py) into --out's `levers`")
     parser.add_argument("--compile", action="store_true", help="add torch.compile to the levers")
+    parser.add_argument("--against", type=Path, metavar="CONFIG",
+                        help="measure only `zoo fit` of --config against CONFIG, taking turns, "
+                             "into --out's `recipes` (old = --config, new = CONFIG)")
     parser.add_argument("--preset-memory", help=argparse.SUPPRESS)  # child-process mode
     args = parser.parse_args()
     if args.preset_memory:
@@ -321,6 +324,16 @@ def main() -> None:
     sizes = QUICK if args.quick else Sizes()
     given = {"steps": args.steps, "e2e_steps": args.e2e_steps}
     sizes = dataclasses.replace(sizes, **{k: v for k, v in given.items() if v is not None})
+    if args.against:
+        results = json.loads(args.out.read_text()) if args.out.exists() else {}
+        results["recipes"] = cvpt_e2e.compare_recipes(
+            args.config, args.against, args.data, sizes.e2e_warmup, sizes.e2e_steps,
+            sizes.e2e_epoch, args.e2e_set, rounds=1 if args.quick else 2)
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(results, indent=2) + "\n")
+        print(json.dumps({k: v for k, v in results["recipes"].items() if k not in ("old", "new")},
+                         indent=2))
+        return
 
     throughput = {
         "tiny_144px": training_throughput(args.data, 2, 64, sizes.steps, 1, args.workers),

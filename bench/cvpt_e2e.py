@@ -203,4 +203,29 @@ def run_fit(recipe_path: Path, data: str, warmup: int, steps: int, epoch_steps: 
     }
 
 
-__all__ = ["StepTimer", "derived_config", "epoch_batches", "run_fit", "set_dotted", "summarize"]
+def compare_recipes(old: Path, new: Path, data: str, warmup: int, steps: int, epoch_steps: int,
+                    overrides: list[str], rounds: int = 2) -> dict:
+    """``run_fit`` of two recipes taking turns (old, new, old, new, ...) on the same data, so
+    load drifts hit both alike; the speedup is the ratio of their mean steady frames/s (at
+    each recipe's own validation cadence, and without it)."""
+    runs: dict[str, list[dict]] = {"old": [], "new": []}
+    for _ in range(rounds):
+        for name, path in (("old", old), ("new", new)):
+            runs[name].append(run_fit(path, data, warmup, steps, epoch_steps, overrides))
+
+    def rate(name: str, key: str) -> float:
+        return mean(run[key] for run in runs[name])
+
+    return {
+        "old": {"config": str(old), "runs": runs["old"]},
+        "new": {"config": str(new), "runs": runs["new"]},
+        "rounds": rounds, "data": data,
+        "frames_per_s": {name: rate(name, "frames_per_s") for name in runs},
+        "recipe_frames_per_s": {name: rate(name, "recipe_frames_per_s") for name in runs},
+        "speedup": rate("new", "frames_per_s") / rate("old", "frames_per_s"),
+        "recipe_speedup": rate("new", "recipe_frames_per_s") / rate("old", "recipe_frames_per_s"),
+    }
+
+
+__all__ = ["StepTimer", "compare_recipes", "derived_config", "epoch_batches", "run_fit",
+           "set_dotted", "summarize"]

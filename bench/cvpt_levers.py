@@ -12,11 +12,14 @@ each is reported as the ratio of its median step time to the recipe's:
   conv weights, oneDNN's preferred layout;
 - ``pre_downsampled``: frames stored at 72 px (the rounded 2x2 mean, ``zoo.gym.batch.downsample``)
   so the encoder skips the 144-px pool; same parameter shapes, slightly different input;
+- ``tile_encoder`` / ``tile_encoder_64ch``: the ``encoder: tiles`` option (zoo/models/tiles.py,
+  one token per 16-px tile of the 144-px frame, 32 or 64 channels) in place of IMPALA: another
+  model, so its speed alone does not make it better (docs/results/cvpt.md scores it);
 - ``one_thread``: ``torch.set_num_threads(1)``, the step's cost of sharing cores;
 - ``shape_16x32`` / ``shape_4x128``: batch x sequence at equal frames per step;
 - ``compile`` (with ``--compile``): ``torch.compile`` (inductor) of the model.
 
-Variants that compute the same function (all but the shapes and ``pre_downsampled``) are
+Variants that compute the same function (all but the shapes, ``pre_downsampled`` and the tile encoders) are
 checked to give the recipe's logits before they are timed.
 """
 
@@ -139,6 +142,9 @@ def levers(build: Callable[..., nn.Module], batch: dict[str, torch.Tensor], bf16
     small.model.encoder.downsample = 1
     variants["pre_downsampled"] = (make_step(small, pooled(batch), bf16, small_frame_logits),
                                    threads)
+    for name, channels in (("tile_encoder", 32), ("tile_encoder_64ch", 64)):  # 144 px, no pool
+        tiles = build(encoder="tiles", tile_channels=channels, input_downsample=1)
+        variants[name] = (make_step(tiles, batch, bf16), threads)
     variants["one_thread"] = (make_step(build(), batch, bf16), 1)
     frames = batch["actions"].numel()
     for b, t in ((16, 32), (4, 128)):  # the recipe's 64-step memory, one window per sequence

@@ -25,6 +25,9 @@ class CVPT(SequenceBC):
         impala_width: int | None = None,
         impala_channels: list[int] | None = None,
         encoder_hidden: int | None = None,
+        encoder: str | None = None,
+        tile_size: int | None = None,
+        tile_channels: int | None = None,
         memory_len: int | None = None,
         dropout: float | None = None,
         input_downsample: int | None = None,
@@ -50,7 +53,11 @@ class CVPT(SequenceBC):
             n_layers: Transformer-XL layers (None: the preset's).
             impala_width: IMPALA channel multiplier (None: the preset's).
             impala_channels: IMPALA base channels per stage (None: [16, 32, 32]).
-            encoder_hidden: dense layer after the IMPALA stack (None: 256).
+            encoder_hidden: dense layer after the encoder's features (None: 256).
+            encoder: ``impala`` (None: the paper's ResNet) or ``tiles`` (one token per tile of
+                Crafter's grid, ~9x fewer FLOPs: a CPU option; zoo/models/tiles.py).
+            tile_size: pixels of one tile in the stored frame (None: 16; ``encoder: tiles``).
+            tile_channels: channels of a tile's embedding (None: 32; ``encoder: tiles``).
             memory_len: TrXL memory and attention span in steps (None: 64).
             dropout: transformer dropout (None: 0).
             input_downsample: average-pool frames by this factor first (None: 1, the paper's).
@@ -86,6 +93,9 @@ class CVPT(SequenceBC):
             "impala_width": impala_width,
             "impala_channels": tuple(impala_channels) if impala_channels is not None else None,
             "encoder_hidden": encoder_hidden,
+            "encoder": encoder,
+            "tile_size": tile_size,
+            "tile_channels": tile_channels,
             "memory_len": memory_len,
             "dropout": dropout,
             "input_downsample": input_downsample,

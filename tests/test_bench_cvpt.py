@@ -152,3 +152,21 @@ def test_the_adamw_levers_reach_every_group_with_the_recipes_settings(option: st
     for a, b in zip(recipe.param_groups, lever.param_groups):
         assert a["params"] == b["params"] and a["weight_decay"] == b["weight_decay"]
         assert (a["lr"], a["betas"], a["eps"]) == (b["lr"], b["betas"], b["eps"])
+
+
+def test_recipes_take_turns_and_the_speedup_is_the_ratio_of_mean_rates(monkeypatch) -> None:
+    """Old, new, old, new: old at 500 then 700 frames/s (mean 600), new at 2,000 and 2,800
+    (mean 2,400): a 4x speedup, and 4x again at the validation cadence."""
+    rates = iter([500.0, 2000.0, 700.0, 2800.0])
+    order = []
+
+    def fake_fit(path, data, warmup, steps, epoch_steps, overrides):
+        order.append(str(path))
+        rate = next(rates)
+        return {"frames_per_s": rate, "recipe_frames_per_s": rate * 0.9}
+
+    monkeypatch.setattr(cvpt_e2e, "run_fit", fake_fit)
+    out = cvpt_e2e.compare_recipes(Path("old.yaml"), Path("new.yaml"), "data/x", 1, 5, 3, [])
+    assert order == ["old.yaml", "new.yaml", "old.yaml", "new.yaml"]
+    assert out["frames_per_s"] == {"old": 600.0, "new": 2400.0}
+    assert out["speedup"] == pytest.approx(4.0) and out["recipe_speedup"] == pytest.approx(4.0)

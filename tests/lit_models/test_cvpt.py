@@ -54,11 +54,16 @@ def _trainer(max_steps: int, root: Path) -> L.Trainer:
     )
 
 
-def test_overfits_a_tiny_batch(tmp_path: Path) -> None:
+ENCODERS = {"impala": {"impala_channels": [2, 4, 4]},
+            "tiles": {"encoder": "tiles", "tile_channels": 4}}
+
+
+@pytest.mark.parametrize("encoder", sorted(ENCODERS))
+def test_overfits_a_tiny_batch(tmp_path: Path, encoder: str) -> None:
     torch.manual_seed(0)
     batch = _patterned_batch()
     module = CVPT(
-        **{**SMALL, "impala_channels": [2, 4, 4]}, lr=1e-2, cosine_steps=1000,
+        **{**SMALL, **ENCODERS[encoder]}, lr=1e-2, cosine_steps=1000,
         activation_checkpointing=False,
     )
     _trainer(30, tmp_path).fit(module, train_dataloaders=_repeat(batch, 30))
@@ -122,10 +127,12 @@ def test_warmup_cosine_schedule() -> None:
     assert schedule(110) == pytest.approx(0.1) and schedule(500) == pytest.approx(0.1)
 
 
-def _trained_checkpoint(batch: dict[str, torch.Tensor], root: Path) -> tuple[CVPT, Path]:
+def _trained_checkpoint(
+    batch: dict[str, torch.Tensor], root: Path, **overrides: object
+) -> tuple[CVPT, Path]:
     """A small CVPT after two steps on ``batch``, and its checkpoint ``root/model.ckpt``."""
     torch.manual_seed(0)
-    module = CVPT(**SMALL, cosine_steps=100)
+    module = CVPT(**{**SMALL, **overrides}, cosine_steps=100)
     trainer = _trainer(2, root)
     trainer.fit(module, train_dataloaders=_repeat(batch, 2))
     path = root / "model.ckpt"
@@ -133,9 +140,10 @@ def _trained_checkpoint(batch: dict[str, torch.Tensor], root: Path) -> tuple[CVP
     return module, path
 
 
-def test_checkpoint_reload_gives_identical_logits(tmp_path: Path) -> None:
+@pytest.mark.parametrize("encoder", sorted(ENCODERS))
+def test_checkpoint_reload_gives_identical_logits(tmp_path: Path, encoder: str) -> None:
     batch = _batch()
-    module, path = _trained_checkpoint(batch, tmp_path)
+    module, path = _trained_checkpoint(batch, tmp_path, **ENCODERS[encoder])
     module.eval()
     with torch.no_grad():
         expected = module(batch["frames"], batch["first"])

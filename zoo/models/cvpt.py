@@ -1,4 +1,7 @@
-"""C-VPT: IMPALA encoder -> Transformer-XL -> policy head (paper section 4.1, VPT's design)."""
+"""C-VPT: IMPALA encoder -> Transformer-XL -> policy head (paper section 4.1, VPT's design).
+
+``encoder: tiles`` swaps the IMPALA ResNet for ``TileEncoder`` (zoo/models/tiles.py), a cheaper
+named option for CPU training."""
 
 from __future__ import annotations
 
@@ -10,6 +13,7 @@ import torch
 from torch import nn
 
 from zoo.models.impala import ImpalaEncoder
+from zoo.models.tiles import TileEncoder
 from zoo.models.trxl import TransformerXL, TrXLState
 
 
@@ -32,8 +36,15 @@ class CVPTConfig:
     """Multiplier of the IMPALA channels."""
     impala_channels: tuple[int, ...] = (16, 32, 32)
     """Base channels of the IMPALA stages (each stage halves the frame size)."""
+    encoder: str = "impala"
+    """Frame encoder: ``impala`` (the paper's ResNet) or ``tiles`` (``TileEncoder``: one token
+    per tile of Crafter's grid, ~9x fewer FLOPs; a named CPU option, not the paper's)."""
+    tile_size: int = 16
+    """Pixels of one tile in the stored frame (``encoder: tiles``; Crafter's 144 px: 16)."""
+    tile_channels: int = 32
+    """Channels of each tile's embedding (``encoder: tiles``)."""
     encoder_hidden: int = 256
-    """Dense layer between the flattened IMPALA features and d_model (VPT uses 256)."""
+    """Dense layer between the flattened encoder features and d_model (VPT uses 256)."""
     memory_len: int = 64
     """Steps of recurrent memory per layer; also the attention span."""
     num_actions: int
@@ -99,14 +110,7 @@ class CVPTModel(nn.Module):
                 f"input_downsample={config.input_downsample} must be >= 1 and divide "
                 f"frame_size={config.frame_size}"
             )
-        self.encoder = ImpalaEncoder(
-            frame_size=config.frame_size,
-            downsample=config.input_downsample,
-            channels=tuple(config.impala_channels),
-            width=config.impala_width,
-            hidden=config.encoder_hidden,
-            out_dim=config.d_model,
-        )
+        self.encoder = frame_encoder(config)
         self.trxl = TransformerXL(
             d_model=config.d_model,
             d_ff=config.d_ff,
@@ -158,6 +162,29 @@ class CVPTModel(nn.Module):
         if self.value is None:
             raise RuntimeError("this model was built with value_head=False")
         return self.value(hidden).squeeze(-1)
+
+
+def frame_encoder(config: CVPTConfig) -> nn.Module:
+    """The encoder ``config.encoder`` names, mapping uint8 frames to (N, d_model)."""
+    if config.encoder == "impala":
+        return ImpalaEncoder(
+            frame_size=config.frame_size,
+            downsample=config.input_downsample,
+            channels=tuple(config.impala_channels),
+            width=config.impala_width,
+            hidden=config.encoder_hidden,
+            out_dim=config.d_model,
+        )
+    if config.encoder == "tiles":
+        return TileEncoder(
+            frame_size=config.frame_size,
+            tile_size=config.tile_size,
+            channels=config.tile_channels,
+            hidden=config.encoder_hidden,
+            out_dim=config.d_model,
+            downsample=config.input_downsample,
+        )
+    raise ValueError(f"encoder={config.encoder!r}: expected 'impala' or 'tiles'")
 
 
 def policy_head(width: int, hidden: int, actions: int) -> nn.Module:

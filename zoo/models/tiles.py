@@ -1,0 +1,62 @@
+"""A frame encoder on Crafter's tile grid: a cheaper alternative to the IMPALA ResNet.
+
+Crafter draws every frame on a grid of square tiles (144 px = 9 x 9 tiles of 16 px: a 9 x 7
+local view over a 9 x 2 inventory), and each tile is one texture: a material, a creature, the
+player facing one way, or an inventory item with its count. ``TileEncoder`` embeds each tile
+with one strided convolution (a patch embedding whose patch is the tile, as a ViT's), mixes
+neighbouring tiles with one pre-activation residual block of 3 x 3 convolutions, and maps the
+flattened grid through a dense layer, as the IMPALA encoder's head does. At the paper's tiny
+widths (32 channels, a 256 dense layer) it counts 9.3x fewer forward FLOPs per frame on 144-px
+frames than IMPALA does at 72 px (tests/zoo/models/test_tiles.py pins both counts). It is a named option (``CVPTConfig.encoder``), never the
+paper configs' default.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from zoo.models.impala import ResidualBlock
+
+
+class TileEncoder(nn.Module):
+    """Maps uint8 frames (N, 3, S, S) to (N, out_dim): one token per ``tile_size``-px tile.
+
+    ``downsample`` > 1 average-pools the frames first; the patch is then ``tile_size //
+    downsample`` px, so each token still covers exactly one tile."""
+
+    def __init__(
+        self,
+        frame_size: int,
+        tile_size: int,
+        channels: int,
+        hidden: int,
+        out_dim: int,
+        downsample: int = 1,
+    ) -> None:
+        super().__init__()
+        if tile_size < 1 or frame_size % tile_size:
+            raise ValueError(
+                f"tile_size={tile_size} must divide frame_size={frame_size} (Crafter's 144-px "
+                f"frames are 9 x 9 tiles of 16 px)"
+            )
+        if tile_size % downsample:
+            raise ValueError(
+                f"input_downsample={downsample} must divide tile_size={tile_size}, so that a "
+                f"patch is still one tile"
+            )
+        self.downsample = downsample
+        patch = tile_size // downsample
+        grid = frame_size // tile_size
+        self.embed = nn.Conv2d(3, channels, kernel_size=patch, stride=patch)
+        self.mix = ResidualBlock(channels)
+        self.hidden = nn.Linear(channels * grid * grid, hidden)
+        self.out = nn.Linear(hidden, out_dim)
+
+    def forward(self, frames: torch.Tensor) -> torch.Tensor:
+        x = frames.float() / 255.0
+        if self.downsample > 1:
+            x = F.avg_pool2d(x, self.downsample)
+        x = self.mix(self.embed(x)).flatten(1)
+        return self.out(F.relu(self.hidden(F.relu(x))))
