@@ -291,6 +291,12 @@ def recipe_levers(recipe_path: Path, data: str, quick: bool, compile_model: bool
                               warmup=1 if quick else 2, compile_model=compile_model)
 
 
+def machine() -> dict:
+    """What the numbers were measured on (the CPU model and its bf16 units matter most)."""
+    return {"platform": platform.platform(), "load_avg_1m": os.getloadavg()[0],
+            **cvpt_profile.cpu_state()}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default="data/crafterplay_smoke")
@@ -317,6 +323,7 @@ def main() -> None:
     if args.levers_only:
         results = json.loads(args.out.read_text()) if args.out.exists() else {}
         results["levers"] = recipe_levers(args.config, args.data, args.quick, args.compile)
+        results["levers"]["machine"] = machine()
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(results, indent=2) + "\n")
         print(json.dumps(results["levers"], indent=2))
@@ -329,6 +336,7 @@ def main() -> None:
         results["recipes"] = cvpt_e2e.compare_recipes(
             args.config, args.against, args.data, sizes.e2e_warmup, sizes.e2e_steps,
             sizes.e2e_epoch, args.e2e_set, rounds=1 if args.quick else 2)
+        results["recipes"]["machine"] = machine()
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(results, indent=2) + "\n")
         print(json.dumps({k: v for k, v in results["recipes"].items() if k not in ("old", "new")},
@@ -349,9 +357,7 @@ def main() -> None:
         )
         presets[name] = json.loads(out.stdout.strip().splitlines()[-1])
     results = {
-        "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
-                    "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
-                    "load_avg_1m": os.getloadavg()[0]},
+        "machine": machine(),
         "training": throughput,
         "datamodule_alone": loader,
         "precision_tiny_72px": bf16_vs_fp32(8, 64, sizes.steps, 2),

@@ -13,9 +13,9 @@ from zoo.models.tiles import TileEncoder
 
 
 def _tokens(encoder: TileEncoder, frames: torch.Tensor) -> torch.Tensor:
-    """The embedding grid (N, C, 9, 9), read off the patch convolution."""
+    """The embedding grid (N, C, 9, 9), read off the residual block's input."""
     seen = []
-    handle = encoder.embed.register_forward_hook(lambda m, i, o: seen.append(o))
+    handle = encoder.mix.register_forward_hook(lambda m, i, o: seen.append(i[0]))
     with torch.no_grad():
         encoder(frames)
     handle.remove()
@@ -35,6 +35,25 @@ def test_each_token_sees_exactly_one_tile(downsample: int) -> None:
     expected = torch.zeros(9, 9, dtype=torch.bool)
     expected[3, 5] = True
     assert torch.equal(changed, expected)
+
+
+@pytest.mark.parametrize("downsample", [1, 2])
+def test_the_patch_matmul_is_the_strided_convolution_of_the_scaled_frame(downsample: int) -> None:
+    """``embed`` runs as one matmul over uint8 patches with its weight / 255; it must be the
+    convolution the parameters describe, ``conv(pool(frames / 255))``, in fp32 and in bf16."""
+    torch.manual_seed(0)
+    encoder = TileEncoder(144, 16, channels=4, hidden=8, out_dim=16, downsample=downsample)
+    frames = torch.randint(0, 256, (3, 3, 144, 144), dtype=torch.uint8)
+    x = frames.float() / 255.0
+    if downsample > 1:
+        x = torch.nn.functional.avg_pool2d(x, downsample)
+    want = encoder.embed(x)
+    torch.testing.assert_close(_tokens(encoder, frames), want, atol=1e-5, rtol=1e-5)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        got = _tokens(encoder, frames)
+        conv = encoder.embed(x)
+    assert got.dtype == torch.bfloat16
+    torch.testing.assert_close(got.float(), conv.float(), atol=0.05, rtol=0.02)
 
 
 def test_forward_flops_by_hand() -> None:
