@@ -169,6 +169,24 @@ def encode_frames(
     return compress_planes(compact_planes(out, len(frames)), codec)
 
 
+@numba.njit(cache=True, nogil=True, boundscheck=False)
+def _untile_frames(planes, frames):
+    """``tile_frames`` undone: (3, n, 9, 9, 16, 16) planes of (R, G-R, B-G) into (n, 144, 144,
+    3) frames, one pass in the frames' order (the numpy transposes it replaced took ~6x as
+    long, a third of a training loader's time)."""
+    for i in range(planes.shape[1]):
+        for row in range(_GRID):
+            for y in range(TILE):
+                for col in range(_GRID):
+                    for x in range(TILE):
+                        red = planes[0, i, row, col, y, x]
+                        green = np.uint8(planes[1, i, row, col, y, x] + red)  # uint8 wraps back
+                        pixel = frames[i, row * TILE + y, col * TILE + x]
+                        pixel[0] = red
+                        pixel[1] = green
+                        pixel[2] = np.uint8(planes[2, i, row, col, y, x] + green)
+
+
 def decode_frames(data: bytes, n: int) -> np.ndarray:
     """Inverse of ``encode_frames`` for ``n`` frames."""
     raw = _decompress(data, "frames")
@@ -176,16 +194,9 @@ def decode_frames(data: bytes, n: int) -> np.ndarray:
     if len(raw) != expected:
         raise ValueError(f"frames: {len(raw)} bytes decoded, expected {expected} for {n} frames")
     planes = np.frombuffer(raw, np.uint8).reshape(3, n, _GRID, _GRID, TILE, TILE)
-    # Undo the channel differences while writing each plane, untiled, into its channel: one
-    # strided pass per channel, ~1.5x faster than transposing a 6-D copy channel-last.
-    frames = np.empty((n, _GRID, TILE, _GRID, TILE, 3), np.uint8)
-    untiled = (0, 1, 3, 2, 4)  # (n, row, col, y, x) -> (n, row, y, col, x)
-    frames[..., 0] = planes[0].transpose(untiled)
-    channel = planes[1] + planes[0]  # uint8 wraps back
-    frames[..., 1] = channel.transpose(untiled)
-    channel += planes[2]
-    frames[..., 2] = channel.transpose(untiled)
-    return frames.reshape(n, *FRAME_SHAPE)
+    frames = np.empty((n, *FRAME_SHAPE), np.uint8)
+    _untile_frames(planes, frames)
+    return frames
 
 
 def encode_arrays(arrays: dict[str, np.ndarray], codec: FrameCodec = FrameCodec()) -> bytes:

@@ -164,10 +164,23 @@ def pack_sequences(
             pending[key].append(chunk[key])
         size += n
         while size >= seq_len:
-            joined = {key: np.concatenate(parts) for key, parts in pending.items()}
-            yield {key: value[:seq_len].copy() for key, value in joined.items()}
-            pending = {key: [value[seq_len:]] for key, value in joined.items()}
+            yield {key: _take(parts, seq_len) for key, parts in pending.items()}
             size -= seq_len
+
+
+def _take(parts: list[np.ndarray], n: int) -> np.ndarray:
+    """The first ``n`` rows of ``parts`` joined, as a new array; ``parts`` keeps the rest as
+    views. Each step is copied once (joining all that is pending at every sequence copied a
+    256-step chunk's frames ~3.5 times over at 64-step sequences)."""
+    taken, size = [], 0
+    while size < n:
+        part = parts.pop(0)
+        if len(part) > n - size:
+            parts.insert(0, part[n - size:])
+            part = part[: n - size]
+        taken.append(part)
+        size += len(part)
+    return np.concatenate(taken)
 
 
 def collate_sequences(samples: list[dict]) -> dict[str, torch.Tensor]:
