@@ -312,6 +312,11 @@ def main() -> None:
     parser.add_argument("--levers-only", action="store_true",
                         help="measure only the levers (cvpt_levers.py) into --out's `levers`")
     parser.add_argument("--compile", action="store_true", help="add torch.compile to the levers")
+    parser.add_argument("--old-code", type=Path, metavar="DIR",
+                        help="with --against: run --config on the package code of DIR (a "
+                             "checkout of the commit before a change: `git worktree add DIR REV`)")
+    parser.add_argument("--loader-only", action="store_true",
+                        help="measure only the datamodule alone into --out's `datamodule_alone`")
     parser.add_argument("--against", type=Path, metavar="CONFIG",
                         help="measure only `zoo fit` of --config against CONFIG, taking turns, "
                              "into --out's `recipes` (old = --config, new = CONFIG)")
@@ -331,15 +336,25 @@ def main() -> None:
     sizes = QUICK if args.quick else Sizes()
     given = {"steps": args.steps, "e2e_steps": args.e2e_steps}
     sizes = dataclasses.replace(sizes, **{k: v for k, v in given.items() if v is not None})
-    if args.against:
+    if args.loader_only:
         results = json.loads(args.out.read_text()) if args.out.exists() else {}
-        results["recipes"] = cvpt_e2e.compare_recipes(
-            args.config, args.against, args.data, sizes.e2e_warmup, sizes.e2e_steps,
-            sizes.e2e_epoch, args.e2e_set, rounds=1 if args.quick else 2)
-        results["recipes"]["machine"] = machine()
+        results["datamodule_alone"] = loader_frames_per_s(
+            args.data, seq_len=64, batch_size=8, min_frames=sizes.loader_frames)
+        results["datamodule_alone"]["machine"] = machine()
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(results, indent=2) + "\n")
-        print(json.dumps({k: v for k, v in results["recipes"].items() if k not in ("old", "new")},
+        print(json.dumps(results["datamodule_alone"]["frames_per_s"]))
+        return
+    if args.against:
+        results = json.loads(args.out.read_text()) if args.out.exists() else {}
+        key = "recipes_vs_old_code" if args.old_code else "recipes"
+        results[key] = cvpt_e2e.compare_recipes(
+            args.config, args.against, args.data, sizes.e2e_warmup, sizes.e2e_steps,
+            sizes.e2e_epoch, args.e2e_set, rounds=1 if args.quick else 2, old_code=args.old_code)
+        results[key]["machine"] = machine()
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(results, indent=2) + "\n")
+        print(json.dumps({k: v for k, v in results[key].items() if k not in ("old", "new")},
                          indent=2))
         return
 

@@ -167,13 +167,17 @@ def summarize(record: dict, warmup: int, frames_per_step: int, recipe_epoch_step
 
 
 def run_fit(recipe_path: Path, data: str, warmup: int, steps: int, epoch_steps: int,
-            overrides: list[str]) -> dict:
-    """`zoo fit` on the derived recipe in a subprocess; ``summarize`` of its timestamps."""
+            overrides: list[str], code_root: Path | None = None) -> dict:
+    """`zoo fit` on the derived recipe in a subprocess; ``summarize`` of its timestamps.
+    ``code_root``: a checkout whose package code the run imports instead of this one (an
+    older commit: the baseline of a change)."""
     recipe = yaml.safe_load(recipe_path.read_text())
     data_args, model_args = recipe["data"]["init_args"], recipe["model"]["init_args"]
     frames = data_args["batch_size"] * data_args["seq_len"]
     recipe_epoch = epoch_batches(data_args["train_batches_per_epoch"], data_args["num_workers"])
-    runs = Path(recipe["trainer"].get("default_root_dir") or "runs/x").parent  # the recipe's disk
+    runs = Path(recipe["trainer"].get("default_root_dir") or "runs/x").parent.resolve()
+    if code_root:  # `python -m` imports from its working directory first: run in code_root
+        data = str(Path(data).resolve())
     runs.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="bench_cvpt_e2e_", dir=runs) as tmp:
         timer_out = Path(tmp) / "steps.json"
@@ -182,10 +186,11 @@ def run_fit(recipe_path: Path, data: str, warmup: int, steps: int, epoch_steps: 
         config_path = Path(tmp) / "config.yaml"
         config_path.write_text(yaml.safe_dump(config, sort_keys=False))
         env = {k: v for k, v in os.environ.items() if k != "ZOO_RUN_DIR"}
-        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(BENCH), env.get("PYTHONPATH")) if p)
+        paths = (str(code_root) if code_root else None, str(BENCH), env.get("PYTHONPATH"))
+        env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
         command = [sys.executable, "-m", "zoo.cli", "fit", "--config", str(config_path)]
         start = time.perf_counter()
-        done = subprocess.run(command, env=env, capture_output=True, text=True)
+        done = subprocess.run(command, env=env, capture_output=True, text=True, cwd=code_root)
         wall = time.perf_counter() - start
         if done.returncode or not timer_out.exists():
             raise RuntimeError(f"zoo fit exited {done.returncode}:\n{done.stderr[-4000:]}")
@@ -193,6 +198,7 @@ def run_fit(recipe_path: Path, data: str, warmup: int, steps: int, epoch_steps: 
     summary = summarize(record, warmup, frames, recipe_epoch)
     return {
         "command": f"zoo fit --config {recipe_path} (derived: see overrides)",
+        "code_root": str(code_root) if code_root else None,
         "overrides": {"data": data, "max_steps": warmup + steps, "epoch_steps": epoch_steps,
                       "logger": "CSVLogger only", "profiler": "SimpleProfiler",
                       "set": list(overrides)},
@@ -204,14 +210,15 @@ def run_fit(recipe_path: Path, data: str, warmup: int, steps: int, epoch_steps: 
 
 
 def compare_recipes(old: Path, new: Path, data: str, warmup: int, steps: int, epoch_steps: int,
-                    overrides: list[str], rounds: int = 2) -> dict:
+                    overrides: list[str], rounds: int = 2, old_code: Path | None = None) -> dict:
     """``run_fit`` of two recipes taking turns (old, new, old, new, ...) on the same data, so
     load drifts hit both alike; the speedup is the ratio of their mean steady frames/s (at
-    each recipe's own validation cadence, and without it)."""
+    each recipe's own validation cadence, and without it). ``old_code``: the old recipe runs
+    on that checkout's package code (the speedup is then the whole change's)."""
     runs: dict[str, list[dict]] = {"old": [], "new": []}
     for _ in range(rounds):
-        for name, path in (("old", old), ("new", new)):
-            runs[name].append(run_fit(path, data, warmup, steps, epoch_steps, overrides))
+        for name, path, code in (("old", old, old_code), ("new", new, None)):
+            runs[name].append(run_fit(path, data, warmup, steps, epoch_steps, overrides, code))
 
     def rate(name: str, key: str) -> float:
         return mean(run[key] for run in runs[name])
@@ -219,7 +226,7 @@ def compare_recipes(old: Path, new: Path, data: str, warmup: int, steps: int, ep
     return {
         "old": {"config": str(old), "runs": runs["old"]},
         "new": {"config": str(new), "runs": runs["new"]},
-        "rounds": rounds, "data": data,
+        "rounds": rounds, "data": data, "old_code": str(old_code) if old_code else None,
         "frames_per_s": {name: rate(name, "frames_per_s") for name in runs},
         "recipe_frames_per_s": {name: rate(name, "recipe_frames_per_s") for name in runs},
         "speedup": rate("new", "frames_per_s") / rate("old", "frames_per_s"),

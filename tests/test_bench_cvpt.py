@@ -160,13 +160,15 @@ def test_recipes_take_turns_and_the_speedup_is_the_ratio_of_mean_rates(monkeypat
     rates = iter([500.0, 2000.0, 700.0, 2800.0])
     order = []
 
-    def fake_fit(path, data, warmup, steps, epoch_steps, overrides):
-        order.append(str(path))
+    def fake_fit(path, data, warmup, steps, epoch_steps, overrides, code_root=None):
+        order.append((str(path), code_root))
         rate = next(rates)
         return {"frames_per_s": rate, "recipe_frames_per_s": rate * 0.9}
 
     monkeypatch.setattr(cvpt_e2e, "run_fit", fake_fit)
-    out = cvpt_e2e.compare_recipes(Path("old.yaml"), Path("new.yaml"), "data/x", 1, 5, 3, [])
-    assert order == ["old.yaml", "new.yaml", "old.yaml", "new.yaml"]
+    out = cvpt_e2e.compare_recipes(Path("old.yaml"), Path("new.yaml"), "data/x", 1, 5, 3, [],
+                                   old_code=Path("/tmp/before"))
+    before, new = ("old.yaml", Path("/tmp/before")), ("new.yaml", None)
+    assert order == [before, new, before, new]  # the old recipe on the old code
     assert out["frames_per_s"] == {"old": 600.0, "new": 2400.0}
     assert out["speedup"] == pytest.approx(4.0) and out["recipe_speedup"] == pytest.approx(4.0)

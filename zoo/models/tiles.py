@@ -56,14 +56,14 @@ class TileEncoder(nn.Module):
 
     def forward(self, frames: torch.Tensor) -> torch.Tensor:
         n, size = frames.shape[0], self.grid
-        tokens = F.linear(self._patches(frames), self.embed.weight.flatten(1) / 255.0,
-                          self.embed.bias)
+        weight = self.embed.weight.permute(0, 2, 3, 1).flatten(1)  # a patch's (y, x, channel)
+        tokens = F.linear(self._patches(frames), weight / 255.0, self.embed.bias)
         x = tokens.view(n, size, size, -1).permute(0, 3, 1, 2)  # (N, C, grid, grid)
         x = self.mix(x).flatten(1)
         return self.out(F.relu(self.hidden(F.relu(x))))
 
     def _patches(self, frames: torch.Tensor) -> torch.Tensor:
-        """(N * grid * grid, 3 * patch * patch) pixel values 0-255 in the compute dtype.
+        """(N * grid * grid, patch * patch * 3) pixel values 0-255 in the compute dtype.
 
         ``embed`` is applied as one matmul over these rows with its weight scaled by 1/255:
         the same function as the strided convolution on frames / 255, but the patches are cut
@@ -77,6 +77,8 @@ class TileEncoder(nn.Module):
         device = frames.device.type
         dtype = (torch.get_autocast_dtype(device) if torch.is_autocast_enabled(device)
                  else torch.float32)
-        rows = torch.empty((n, size, size, 3, patch, patch), dtype=dtype, device=frames.device)
-        rows.copy_(x.reshape(n, 3, size, patch, size, patch).permute(0, 2, 4, 1, 3, 5))
-        return rows.view(n * size * size, 3 * patch * patch)  # cut and cast in one pass
+        # Rows in (y, x, channel) order: from channel-last frames (the datasets' layout, of
+        # which ``encode_frames`` passes a view) each patch row is 16 x 3 contiguous bytes.
+        rows = torch.empty((n, size, size, patch, patch, 3), dtype=dtype, device=frames.device)
+        rows.copy_(x.reshape(n, 3, size, patch, size, patch).permute(0, 2, 4, 3, 5, 1))
+        return rows.view(n * size * size, patch * patch * 3)  # cut and cast in one pass
