@@ -69,7 +69,7 @@ class TileEncoder(nn.Module):
         the same function as the strided convolution on frames / 255, but the patches are cut
         from the uint8 frames and cast once (under bf16 autocast straight to bf16, where 0-255
         are exact), which on a CPU is ~4x cheaper than converting, dividing and convolving the
-        144-px float frame (bench/cvpt_levers.py)."""
+        144-px float frame (an A/B of the two on one 512-frame batch; docs/results/cvpt.md)."""
         n, patch, size = frames.shape[0], self.patch, self.grid
         x = frames
         if self.downsample > 1:
