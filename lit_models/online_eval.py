@@ -46,7 +46,7 @@ class OnlineEvaluation(Callback):
         instruction: str | None = None,
         cclip: str | None = None,
         prior: str | None = None,
-        cfg_scale: float = 1.5,
+        cfg_scale: float | None = None,
         video: bool = True,
     ) -> None:
         """
@@ -61,7 +61,7 @@ class OnlineEvaluation(Callback):
             instruction: C-Steve-1: the instruction text given after every reset.
             cclip: C-Steve-1: the C-CLIP checkpoint/export that reads the instruction.
             prior: C-Steve-1: the CVAE prior checkpoint/export (text -> goal).
-            cfg_scale: C-Steve-1: classifier-free guidance scale (paper 1.5).
+            cfg_scale: C-Steve-1: classifier-free guidance scale (None: the paper's).
             video: log the first episode as a W&B video.
         """
         super().__init__()
@@ -107,8 +107,8 @@ class OnlineEvaluation(Callback):
                 raise ValueError("OnlineEvaluation of C-Steve-1 needs task, instruction, cclip, prior")
             if self._goals is None:
                 self._goals = GoalEncoder.load(self.cclip, self.prior)
-            agent = SteveAgent(StevePolicy(model, cfg_scale=self.cfg_scale), self._goals,
-                               self.num_envs)
+            agent = SteveAgent(StevePolicy(model, cfg_scale=self.cfg_scale), self.num_envs,
+                               self._goals)
             if self._env is None:
                 self._env = make_task_env(self.task, self.env_name, self.num_envs,
                                           max_steps=self.max_steps)

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from zoo.agents import make_agent
+from zoo.agents import AgentSpec
 from zoo.agents.steve_agent import StevePolicy
 from zoo.cli import main
 from zoo.envs.constants import NUM_ACTIONS
@@ -79,8 +79,8 @@ def test_export_records_the_scale_and_loading_plays_at_it(
     assert (policy.cfg_scale, policy.temperature, policy.greedy) == (0.7, 1.0, False)
     told = StevePolicy.load(out, cfg_scale=2.0, temperature=0.5)
     assert (told.cfg_scale, told.temperature) == (2.0, 0.5)
-    assert make_agent("csteve1", 1, str(out)).inference == recorded
-    assert make_agent("csteve1", 1, str(out), temperature=0, cfg_scale=0).inference == {
+    assert AgentSpec("csteve1", out).build(1).inference == recorded
+    assert AgentSpec("csteve1", out, temperature=0, cfg_scale=0).build(1).inference == {
         "cfg_scale": 0.0, "temperature": 0.0
     }
 
@@ -91,7 +91,7 @@ def test_a_recorded_temperature_of_zero_plays_the_most_likely_action(
     out = _export(steve_ckpt, tmp_path / "export", "--temperature", "0")
     policy = StevePolicy.load(out)
     assert (policy.cfg_scale, policy.greedy) == (1.5, True)
-    assert make_agent("csteve1", 1, str(out)).inference == {"cfg_scale": 1.5, "temperature": 0.0}
+    assert AgentSpec("csteve1", out).build(1).inference == {"cfg_scale": 1.5, "temperature": 0.0}
 
 
 def test_checkpoints_and_older_exports_play_at_the_defaults(
@@ -162,7 +162,7 @@ def test_eval_report_and_play_log_record_the_scale_they_played_at(
 def test_cfg_scale_is_for_c_steve_1_only(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     argv = ["eval", "--agent", "random", "--env", "crafter", "--out", str(tmp_path)]
     assert main([*argv, "--cfg-scale", "1.5"]) == 2
-    assert "--cfg-scale are for C-Steve-1 checkpoints only" in capsys.readouterr().err
+    assert "--cfg-scale apply to C-Steve-1 only, not 'random'" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(

@@ -5,7 +5,8 @@
   6-frame video clip (C-CLIP video tower, what training used).
 - ``StevePolicy``: ``initial_state(n)`` and ``act(frames, goals, state)``, one frame per env per
   call with cached TrXL memory, classifier-free guidance with scale ``cfg_scale``; ``load``
-  plays at the scale and temperature its export records, else the paper's 1.5 and 1.
+  plays at the scale and temperature its export records, else the paper's and 1, and reads
+  text through the goal models its export records (``goals``, built when first used).
 - ``instruction_note``: for an instruction that is not a caption, the caption C-CLIP finds
   nearest (free text is allowed; the note says what it resembles).
 - ``SteveAgent``: an ``InstructableAgent`` for ``zoo eval``/``zoo play`` (``instruct`` sets an
@@ -15,6 +16,7 @@
 from __future__ import annotations
 
 import zlib
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +30,8 @@ from zoo.models.prior import CVAEPrior
 from zoo.models.sampling import sample_actions
 from zoo.models.steve import SteveModel
 from zoo.models.trxl import TrXLState
-from zoo.weights import inference_settings, load_model
+from zoo.weights.export import inference_settings, load_model, recorded_goal_models
+from zoo.weights.guidance import PAPER_CFG_SCALE
 
 
 def is_steve_checkpoint(checkpoint: dict) -> bool:
@@ -116,19 +119,27 @@ def instruction_note(goals: GoalEncoder, text: str) -> str | None:
 
 
 class StevePolicy:
-    """Steps N envs one frame at a time towards per-env goals, with classifier-free guidance."""
+    """Steps N envs one frame at a time towards per-env goals, with classifier-free guidance.
+
+    ``cfg_scale`` None is the paper's. ``goals`` reads text instructions through
+    ``goal_models`` (C-CLIP and prior paths), else through the ones the ``export`` folder it
+    was loaded from records.
+    """
 
     def __init__(
         self,
         model: SteveModel,
         device: str | torch.device = "cpu",
-        cfg_scale: float = 1.5,
+        cfg_scale: float | None = None,
         temperature: float = 1.0,
         greedy: bool = False,
         seed: int = 0,
+        goal_models: dict[str, str | Path] | None = None,
+        export: str | Path | None = None,
     ) -> None:
         if temperature <= 0:
             raise ValueError(f"temperature must be > 0, got {temperature}")
+        cfg_scale = PAPER_CFG_SCALE if cfg_scale is None else cfg_scale
         if cfg_scale < 0:
             raise ValueError(f"cfg_scale must be >= 0, got {cfg_scale}")
         self.device = torch.device(device)
@@ -136,7 +147,26 @@ class StevePolicy:
         self.cfg_scale = cfg_scale
         self.temperature = temperature
         self.greedy = greedy
+        self.goal_models, self.export = goal_models, export
         self._rng = np.random.default_rng(seed)
+
+    @cached_property
+    def goals(self) -> GoalEncoder:
+        """Text -> goal through ``goal_models`` (loaded when first asked for: C-CLIP's text
+        tower is slow to import and a policy given video goals never needs it)."""
+        models = self.goal_models
+        if models is None and self.export is not None:
+            models = recorded_goal_models(self.export)
+        if models is None:
+            raise ValueError("this C-Steve-1 has no goal models, so it cannot read text: give "
+                             "--cclip and --prior")
+        goals = GoalEncoder.load(models["cclip"], models["prior"])
+        if goals.goal_dim != self.goal_dim:
+            raise ValueError(
+                f"the C-CLIP {models['cclip']} embeds {goals.goal_dim} dimensions but "
+                f"C-Steve-1 expects goal_dim={self.goal_dim}: use the C-CLIP it was trained with"
+            )
+        return goals
 
     @classmethod
     def load(
@@ -147,17 +177,22 @@ class StevePolicy:
         temperature: float | None = None,
         greedy: bool = False,
         seed: int = 0,
+        cclip: str | Path | None = None,
+        prior: str | Path | None = None,
     ) -> StevePolicy:
         """The C-Steve-1 at ``path`` (export folder or ``.ckpt``). ``cfg_scale`` and
         ``temperature`` left None are what its export records (the settings its scores were
-        measured at, ``zoo export --cfg-scale``), else the paper's 1.5 and 1; a temperature of
-        0 plays the most likely action."""
+        measured at, ``zoo export --cfg-scale``), else the paper's and 1; a temperature of 0
+        plays the most likely action. ``cclip`` and ``prior`` left None are the goal models
+        its export records (``zoo export --cclip --prior``), read when text first needs them."""
         model = load_model(path, "csteve1")  # checks an export's sums before its config is read
         recorded = inference_settings(path, "csteve1")
         cfg_scale = recorded["cfg_scale"] if cfg_scale is None else cfg_scale
         temperature = recorded["temperature"] if temperature is None else temperature
         greedy = greedy or temperature == 0
-        return cls(model, device, cfg_scale, 1.0 if greedy else temperature, greedy, seed)
+        goal_models = None if cclip is None else {"cclip": cclip, "prior": prior}
+        return cls(model, device, cfg_scale, 1.0 if greedy else temperature, greedy, seed,
+                   goal_models, path)
 
     @property
     def goal_dim(self) -> int:
@@ -247,25 +282,33 @@ class StevePolicy:
 
 
 class SteveAgent:
-    """``InstructableAgent`` for N envs: C-Steve-1 following each env's current instruction."""
+    """``InstructableAgent`` for N envs: C-Steve-1 following each env's current instruction,
+    read through ``goals`` (None: the policy's own, ``StevePolicy.goals``)."""
 
     name = "csteve1"
     needs_pixels = True
 
-    def __init__(self, policy: StevePolicy, goals: GoalEncoder | None, num_envs: int) -> None:
+    def __init__(
+        self, policy: StevePolicy, num_envs: int, goals: GoalEncoder | None = None
+    ) -> None:
         if goals is not None and goals.goal_dim != policy.goal_dim:
             raise ValueError(
                 f"the C-CLIP embeds {goals.goal_dim} dimensions but C-Steve-1 expects "
                 f"goal_dim={policy.goal_dim}: use the C-CLIP it was trained with"
             )
         self.policy = policy
-        self.goals = goals
+        self._goals = goals
         self.num_envs = num_envs
         self._state = policy.initial_state(num_envs)
         self._episodes = EpisodeStreams(num_envs)
         self._seeds = np.zeros(num_envs, dtype=np.int64)
         self._goal = torch.zeros(num_envs, policy.goal_dim)
         self.instructions: list[str | None] = [None] * num_envs
+
+    @property
+    def goals(self) -> GoalEncoder:
+        """What reads its text instructions."""
+        return self.policy.goals if self._goals is None else self._goals
 
     @property
     def inference(self) -> dict[str, float]:
@@ -299,8 +342,6 @@ class SteveAgent:
         if text is None:
             self._goal[i] = 0
             return
-        if self.goals is None:
-            raise ValueError("SteveAgent was built without a GoalEncoder: it cannot read text")
         seed = int(self._seeds[i]) ^ zlib.crc32(text.encode())
         self._goal[i] = self.goals.from_text([text], seed=seed)[0]
 

@@ -9,7 +9,7 @@ import json
 import sys
 from pathlib import Path
 
-from zoo.agents import AGENT_NAMES, checkpoint_kind
+from zoo.agents import AGENT_NAMES, AgentSpec
 from zoo.argtypes import existing_dir, out_dir, positive_int, shard_range
 from zoo.envs import ENV_NAMES
 from zoo.envs.tasks.starts import START_STATES
@@ -202,35 +202,25 @@ def _schedule(args):
         args._parser.error(f"--instructions: {err}")
 
 
-def _learner_goal_models(args, kind: str) -> dict:
-    """The C-Steve-1 learner's goal models and guidance for ``DaggerSettings`` (checked: a
-    C-Steve-1 needs both, a C-VPT takes none)."""
-    from zoo.weights.export import checkpoint_sha256
-
-    given = [flag for flag, value in (("--cclip", args.cclip), ("--prior", args.prior),
-                                      ("--cfg-scale", args.cfg_scale)) if value is not None]
-    if kind != "csteve1":
-        if given:
-            args._parser.error(f"{', '.join(given)} apply to a C-Steve-1 learner; "
-                               f"{args.checkpoint} is a C-VPT")
-        return {}
-    missing = [flag for flag, value in (("--cclip", args.cclip), ("--prior", args.prior))
-               if value is None]
-    if missing:
-        args._parser.error(f"a C-Steve-1 learner reads its instructions through "
-                           f"{' and '.join(missing)} (its C-CLIP and CVAE prior checkpoints)")
-    if args.instructions is None:
-        args._parser.error("a C-Steve-1 learner needs --instructions: the schedule it is told")
-    if args.cfg_scale is not None and args.cfg_scale < 0:
-        args._parser.error(f"--cfg-scale must be >= 0, got {args.cfg_scale}")
-    models = {}
-    for name in ("cclip", "prior"):
-        path = Path(getattr(args, name))
-        if not path.exists():
-            args._parser.error(f"--{name} {path} does not exist")
-        models[name] = str(path.resolve())
-        models[f"{name}_sha256"] = checkpoint_sha256(path)
-    return {**models, "cfg_scale": args.cfg_scale}
+def _learner(args):
+    """The learner's ``AgentSpec``, checked: a C-VPT, or a C-Steve-1 told a schedule that it
+    can read (its goal models given, or recorded in its export)."""
+    if args.temperature <= 0:
+        args._parser.error(f"--temperature must be > 0, got {args.temperature}")
+    try:
+        spec = AgentSpec(None, args.checkpoint, args.temperature, args.cfg_scale, args.cclip,
+                         args.prior)
+        if spec.kind not in ("cvpt", "csteve1"):
+            raise ValueError(f"--checkpoint {args.checkpoint} holds a {spec.kind} agent; the "
+                             "learner must be a C-VPT or C-Steve-1")
+        if spec.kind == "csteve1":
+            if args.instructions is None:
+                raise ValueError("a C-Steve-1 learner needs --instructions: the schedule it is "
+                                 "told")
+            spec.require_text()
+    except ValueError as err:
+        args._parser.error(str(err))
+    return spec
 
 
 def _dagger(args) -> int:
@@ -238,33 +228,17 @@ def _dagger(args) -> int:
 
     from zoo.data.generate import GenerationConfig
     from zoo.data.shard_generator import DaggerSettings
-    from zoo.weights.export import checkpoint_sha256
 
-    learner = Path(args.checkpoint)
-    if not learner.exists():
-        args._parser.error(f"--checkpoint {learner} does not exist")
     if not 0.0 <= args.beta <= 1.0:
         args._parser.error(f"--beta must be in [0, 1], got {args.beta}")
-    if args.temperature <= 0:
-        args._parser.error(f"--temperature must be > 0, got {args.temperature}")
     _check_frames(args)
-    try:
-        kind = checkpoint_kind(learner)
-    except ValueError as err:
-        args._parser.error(f"--checkpoint: {err}")
-    if kind not in ("cvpt", "csteve1"):
-        args._parser.error(f"--checkpoint {learner} holds a {kind} agent; the learner must be "
-                           "a C-VPT or C-Steve-1")
-    goal_models = _learner_goal_models(args, kind)
+    learner = _learner(args)
     config = GenerationConfig(
         expert=args.expert, episodes=args.episodes, seed=args.seed, env=args.env,
         episodes_per_shard=args.episodes_per_shard, chunk_length=args.chunk_length,
         max_steps=args.max_steps, frames=args.frames, instructions=_schedule(args),
-        dagger=DaggerSettings(
-            learner=str(learner.resolve()), learner_sha256=checkpoint_sha256(learner),
-            learner_temperature=args.temperature, beta=args.beta, mix=args.mix, round=args.round,
-            **goal_models,
-        ),
+        dagger=DaggerSettings(learner=learner.record(), beta=args.beta, mix=args.mix,
+                              round=args.round),
     )
     if args.workers > 1:  # each spawned worker runs the learner: share the cores, not oversubscribe
         os.environ.setdefault("OMP_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // args.workers)))

@@ -121,10 +121,12 @@ def format_info(info: dict) -> str:
         f"filtering runs < {info['noop_min_run']}",
     ]
     if dagger := cfg.get("dagger"):
+        learner = dagger["learner"]
         lines.append(
-            f"DAgger round {dagger['round']}: learner {dagger['learner']} (sha256 "
-            f"{dagger['learner_sha256'][:12]}..., temperature {dagger['learner_temperature']}), "
-            f"expert acts with beta {dagger['beta']} per {dagger['mix']}"
+            f"DAgger round {dagger['round']}: learner {learner['kind']} {learner['checkpoint']} "
+            f"(sha256 {learner['checkpoint_sha256'][:12]}..., temperature "
+            f"{learner.get('temperature', 1.0)}), expert acts with beta {dagger['beta']} per "
+            f"{dagger['mix']}"
         )
     if info["instructions"]:
         lines += _instruction_lines(info["instructions"], cfg["instructions"]["timeout"])

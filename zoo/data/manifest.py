@@ -19,11 +19,6 @@ MANIFEST = "manifest.json"
 FORMAT = "crafterplay"
 FORMAT_VERSION = 1
 VERSIONED_PACKAGES = ("crafter-zoo", "crafter", "craftax", "jax", "numpy", "zstandard")
-FLAT_DAGGER_KEYS = ("learner", "learner_sha256", "learner_temperature", "beta", "mix", "round")
-"""The DAgger settings that manifests written before ``GenerationConfig.dagger`` held flat in
-``config``, beside ``source`` ("dagger" or None)."""
-LATER_DAGGER_KEYS = ("cclip", "cclip_sha256", "prior", "prior_sha256", "cfg_scale")
-"""``DaggerSettings``' fields added after the flat form (a C-Steve-1 learner's goal models)."""
 ADDED_CONFIG_KEYS = ("instructions", "start_states")
 """``config`` fields newer than some manifests, read as None (their default) where one lacks
 them, so an old folder's config reads as this zoo writes it."""
@@ -73,7 +68,6 @@ def load_manifest(root: str | Path) -> dict | None:
             f"reads version {FORMAT_VERSION}; regenerate the data with this version"
         )
     if "config" in manifest:
-        manifest["config"] = nest_dagger(manifest["config"])
         for key in ADDED_CONFIG_KEYS:
             manifest["config"].setdefault(key, None)
     return manifest
@@ -88,19 +82,6 @@ def require_manifest(root: str | Path) -> dict:
             " `zoo data generate`)"
         )
     return manifest
-
-
-def nest_dagger(config: dict) -> dict:
-    """``config`` in the form this zoo writes: an older manifest's flat DAgger fields (and
-    ``source``) become the nested ``dagger`` settings, or ``dagger: None`` for expert play,
-    so old folders still resume, merge and compare with ``asdict(GenerationConfig)``."""
-    if "source" not in config:
-        return config
-    config = dict(config)
-    flat = {key: config.pop(key, None) for key in FLAT_DAGGER_KEYS}
-    nested = flat | dict.fromkeys(LATER_DAGGER_KEYS)  # none of these folders had a C-Steve-1
-    config["dagger"] = nested if config.pop("source") == "dagger" else None
-    return config
 
 
 def save_manifest(root: str | Path, manifest: dict) -> None:

@@ -53,38 +53,26 @@ class DaggerSettings:
     every state it reaches. Stored nested in the manifest's ``config`` as ``dagger``.
 
     Args:
-        learner: the C-VPT or C-Steve-1 (.ckpt or export folder) that plays.
-        learner_sha256: the learner's fingerprint (``zoo.weights.export.checkpoint_sha256``),
-            so other weights at the same path make another dataset.
-        learner_temperature: the learner's sampling temperature.
+        learner: the learner as ``zoo.agents.AgentSpec.record`` writes it: a C-VPT or C-Steve-1
+            (kind), its checkpoint and, for a C-Steve-1, its goal models, each with its sha256
+            (so other weights at the same path make another dataset), its temperature and
+            guidance.
         beta: probability that the expert acts instead of the learner.
         mix: "episode" or "step", what one beta draw decides.
         round: the round number, for the record.
-        cclip, prior: a C-Steve-1 learner's goal models (its instructions' text -> goals),
-            with their sha256s (``cclip_sha256``, ``prior_sha256``); None for a C-VPT.
-        cfg_scale: a C-Steve-1 learner's guidance scale (None: what its export records).
     """
 
-    learner: str
-    learner_sha256: str
-    learner_temperature: float
+    learner: dict = field(hash=False)  # a dict: keep hash() working
     beta: float
     mix: str
     round: int | None = None
-    cclip: str | None = None
-    cclip_sha256: str | None = None
-    prior: str | None = None
-    prior_sha256: str | None = None
-    cfg_scale: float | None = None
 
     def __post_init__(self) -> None:
-        # None can come from an old manifest's flat fields (``zoo.data.manifest.nest_dagger``);
         # the values' ranges are checked by the agents that play them (``DaggerMixture``)
-        if None in (self.learner, self.learner_sha256, self.learner_temperature, self.beta,
-                    self.mix):
-            raise ValueError(
-                "a DAgger dataset needs learner, learner_sha256, learner_temperature, beta, mix"
-            )
+        if not isinstance(self.learner, dict) or not {"kind", "checkpoint",
+                                                      "checkpoint_sha256"} <= self.learner.keys():
+            raise ValueError("a DAgger dataset's learner is an AgentSpec record with kind, "
+                             f"checkpoint and checkpoint_sha256, got {self.learner!r}")
 
 
 @dataclass(frozen=True)
@@ -92,7 +80,7 @@ class GenerationConfig:
     """Everything that decides a dataset's content (stored in the manifest as ``config``).
 
     Args:
-        expert: agent name for ``zoo.agents.make_agent`` ("scripted", "ppo", "random").
+        expert: agent kind of ``zoo.agents.AgentSpec`` ("scripted", "ppo", "random").
         checkpoint: the expert's checkpoint (PPO), None otherwise.
         episodes: episodes in the dataset.
         seed: dataset seed; episode j is seeded from (seed, j).

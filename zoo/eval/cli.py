@@ -10,12 +10,13 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-from zoo.agents import AGENT_NAMES, checkpoint_kind, load_checkpoint_agent, make_agent
+from zoo.agents import AGENT_NAMES, AgentSpec
 from zoo.argtypes import existing_dir, non_negative_int, out_dir, positive_int
 from zoo.envs import ENV_NAMES
 from zoo.envs.tasks import SINGLE_STEP_TASKS, TASKS
 from zoo.eval.play import inference_meta
 from zoo.eval.steve_tables import STEVE_ROWS, TABLE_ROWS
+from zoo.weights.guidance import PAPER_CFG_SCALE
 
 DESCRIPTION = """\
 Play an agent in Craftax-Classic or original crafter and score it the paper's way: Crafter
@@ -89,16 +90,18 @@ def register(subparsers) -> None:
     )
     p.add_argument(
         "--cclip", type=Path, metavar="CKPT",
-        help="C-Steve-1: the C-CLIP checkpoint it was trained with (reads --instruction text)",
+        help="C-Steve-1: the C-CLIP checkpoint it was trained with, which reads --instruction "
+        "text (default: the one its export records)",
     )
     p.add_argument(
         "--prior", type=Path, metavar="CKPT",
-        help="C-Steve-1: the CVAE prior checkpoint (text embedding -> goal)",
+        help="C-Steve-1: the CVAE prior checkpoint, text embedding -> goal (default: the one "
+        "its export records)",
     )
     p.add_argument(
         "--cfg-scale", type=float,
         help="C-Steve-1: classifier-free guidance scale (default: the scale its export "
-        "records, else the paper's 1.5; 0: conditional only)",
+        f"records, else the paper's {PAPER_CFG_SCALE}; 0: conditional only)",
     )
     p.add_argument("--no-gif", action="store_true", help="skip episode.gif")
     p.add_argument("--overwrite", action="store_true", help="replace a report already in --out")
@@ -140,17 +143,18 @@ def _protocol_description(mode: str, line: str) -> str:
 
 
 def _add_goal_models(p: argparse.ArgumentParser, required: bool) -> None:
+    default = "" if required else " (default: the one the C-Steve-1 export records)"
     p.add_argument("--cclip", type=Path, required=required, metavar="CKPT",
-                   help="C-CLIP of C-Steve-1's goals")
+                   help=f"C-CLIP of C-Steve-1's goals{default}")
     p.add_argument("--prior", type=Path, required=required, metavar="CKPT",
-                   help="CVAE prior: text -> goal")
+                   help=f"CVAE prior: text -> goal{default}")
 
 
 def _add_play_args(p: argparse.ArgumentParser, steve_required: bool) -> None:
     """What the played protocols share: the games, episodes and C-Steve-1's checkpoints."""
     p.add_argument("--csteve1", type=Path, required=steve_required, metavar="CKPT",
                    help="C-Steve-1 checkpoint or export")
-    _add_goal_models(p, steve_required)
+    _add_goal_models(p, required=False)
     _add_episode_args(p)
 
 
@@ -179,7 +183,7 @@ def _add_table_args(p: argparse.ArgumentParser) -> None:
                    "e.g. the baselines while C-Steve-1 trains)")
     p.add_argument("--cfg-scale", type=float,
                    help="C-Steve-1's classifier-free guidance scale (default: the scale its "
-                   "export records, else the paper's 1.5)")
+                   f"export records, else the paper's {PAPER_CFG_SCALE})")
 
 
 def _add_sweep_args(p: argparse.ArgumentParser) -> None:
@@ -213,31 +217,14 @@ def _check_out(out: Path, overwrite: bool) -> None:
 
 
 def _build_agent(args: argparse.Namespace, num_envs: int):
-    """The agent named by --agent, or, with only --checkpoint, the one the checkpoint holds
-    (``zoo.agents.load_checkpoint_agent``: C-VPT, C-Steve-1 or PPO)."""
-    if args.checkpoint is not None and not args.checkpoint.exists():
-        raise UsageError(f"--checkpoint {args.checkpoint} does not exist")
-    checkpoint = None if args.checkpoint is None else str(args.checkpoint)
+    """The spec and agent named by --agent, or, with only --checkpoint, the one the checkpoint
+    holds (``zoo.agents.AgentSpec``); on a task it must read instructions as text."""
     try:
-        name = args.agent or (checkpoint_kind(checkpoint) if checkpoint is not None else None)
-        steve = {
-            "cclip": None if args.cclip is None else str(args.cclip),
-            "prior": None if args.prior is None else str(args.prior),
-            "cfg_scale": args.cfg_scale,
-        }
-        if name != "csteve1" and (args.cclip or args.prior or args.cfg_scale is not None):
-            raise UsageError("--cclip, --prior and --cfg-scale are for C-Steve-1 checkpoints only")
-        if name == "csteve1" and args.task and not (args.cclip and args.prior):
-            raise UsageError(
-                "C-Steve-1 on a task reads its instructions as text: give --cclip (the C-CLIP it "
-                "was trained with) and --prior (e.g. weights/cclip_cpu, weights/prior_cpu)"
-            )
-        options = steve if name == "csteve1" else {}
-        if args.agent is None:
-            if checkpoint is None:
-                raise UsageError(f"--agent is required (one of {', '.join(AGENT_NAMES)})")
-            return load_checkpoint_agent(checkpoint, num_envs, args.temperature, **options)
-        return make_agent(args.agent, num_envs, checkpoint, args.temperature, **options)
+        spec = AgentSpec(args.agent, args.checkpoint, args.temperature, args.cfg_scale,
+                         args.cclip, args.prior)
+        if args.task:
+            spec.require_text()
+        return spec, spec.build(num_envs)
     except (ValueError, FileNotFoundError) as err:  # a bad checkpoint names its file
         raise UsageError(str(err)) from None
     except ImportError as err:
@@ -270,9 +257,9 @@ def run_eval(args: argparse.Namespace) -> int:
             args.out = Path("runs", "eval", f"{who}-{what}-{now:%Y%m%d-%H%M%S}")
         _check_task_args(args)
         _check_out(args.out, args.overwrite)
-        agent = _build_agent(args, num_envs)
+        spec, agent = _build_agent(args, num_envs)
         if args.task is not None:
-            return run_task_eval(args, agent, num_envs, now)
+            return run_task_eval(args, spec, agent, num_envs, now)
     except UsageError as err:
         print(f"zoo eval: error: {err}", file=sys.stderr)
         return 2
@@ -289,6 +276,7 @@ def run_eval(args: argparse.Namespace) -> int:
         "agent": args.agent or getattr(agent, "name", "checkpoint"),
         "checkpoint": None if args.checkpoint is None else str(args.checkpoint),
         **inference_meta(agent, args.temperature),
+        "agent_spec": spec.record(),
         "seed": args.seed,
         "num_envs": num_envs,
         "max_steps": args.max_steps,
@@ -311,7 +299,9 @@ def _announce(args: argparse.Namespace, report: dict) -> None:
         print(f"W&B run in {log_report(report, args.out)} (sync: wandb sync <that folder>)")
 
 
-def run_task_eval(args: argparse.Namespace, agent, num_envs: int, now: datetime) -> int:
+def run_task_eval(
+    args: argparse.Namespace, spec: AgentSpec, agent, num_envs: int, now: datetime
+) -> int:
     """``zoo eval --task``: success of ``agent`` on the task (see ``zoo.eval.task_eval``)."""
     from zoo.envs.tasks import make_task_env
     from zoo.eval.task_eval import evaluate_task, format_task_table, write_task_report
@@ -357,6 +347,7 @@ def run_task_eval(args: argparse.Namespace, agent, num_envs: int, now: datetime)
         "agent": args.agent or getattr(agent, "name", "checkpoint"),
         "checkpoint": None if args.checkpoint is None else str(args.checkpoint),
         **played,
+        "agent_spec": spec.record(),
         "seed": args.seed,
         "num_envs": num_envs,
         "max_steps": args.max_steps or task.max_steps,
@@ -388,7 +379,7 @@ def run_protocol(args: argparse.Namespace) -> int:
         else:
             setting = steve_tables.Setting(
                 args.out, tuple(args.env), args.episodes, args.seed, args.num_envs,
-                args.temperature, args.csteve1, args.cclip, args.prior,
+                args.temperature, _protocol_steve(args),
             )
             rows = (steve_tables.table(setting, args.tasks, args.rows, args.cvpt, args.cfg_scale)
                     if mode == "table" else steve_tables.sweep(setting, args.cfg_scales))
@@ -409,8 +400,21 @@ def _check_protocol_args(args: argparse.Namespace) -> None:
         return  # the other two require their checkpoints in the parser
     if "cvpt" in args.rows and args.cvpt is None:
         raise UsageError("the cvpt row needs --cvpt (the unconditioned baseline)")
-    if set(STEVE_ROWS) & set(args.rows) and None in (args.csteve1, args.cclip, args.prior):
-        raise UsageError("C-Steve-1 rows need --csteve1, --cclip and --prior")
+    if set(STEVE_ROWS) & set(args.rows) and args.csteve1 is None:
+        raise UsageError("C-Steve-1 rows need --csteve1")
+
+
+def _protocol_steve(args: argparse.Namespace) -> AgentSpec | None:
+    """The C-Steve-1 a table or sweep plays (None: no C-Steve-1 row), able to read text."""
+    if args.csteve1 is None:
+        return None
+    try:
+        spec = AgentSpec("csteve1", args.csteve1, args.temperature, cclip=args.cclip,
+                         prior=args.prior)
+        spec.require_text()
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    return spec
 
 
 def _register_instruction_matrix(protocols) -> None:
@@ -433,10 +437,10 @@ def run_instruction_matrix(args: argparse.Namespace) -> int:
     """``zoo eval instructions``: play or read every row, then write the report."""
     from zoo.eval import instruction_matrix as matrix
     num_envs = min(args.num_envs, args.episodes)
-    paths = [None if p is None else str(p) for p in (args.checkpoint, args.cclip, args.prior)]
-    setting = matrix.Setting(args.agent, *paths, args.cfg_scale, args.temperature, args.seed,
-                             args.episodes, args.max_steps)
     try:
+        spec = AgentSpec(args.agent, args.checkpoint, args.temperature, args.cfg_scale,
+                         args.cclip, args.prior)
+        setting = matrix.Setting(spec, args.seed, args.episodes, args.max_steps)
         columns = matrix.pick_columns(args.instructions)
         agent, setting = matrix.make_instructable(setting, num_envs, columns)
         matrix.check_saved(args.out, args.env, columns, setting)

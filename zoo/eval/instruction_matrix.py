@@ -20,13 +20,13 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
-from zoo.agents import checkpoint_kind, make_agent
+from zoo.agents import AgentSpec
 from zoo.agents.base import InstructableAgent
 from zoo.envs import ACHIEVEMENT_NAMES, Achievement, make_env
 from zoo.envs.base import GameEnv, Step
@@ -67,18 +67,19 @@ HORIZONS = "also score the same episodes within their first H steps (each H <= -
 @dataclass(frozen=True)
 class Setting:
     """What every row of a matrix shares: a row saved under another setting is not reused.
-    ``agent``, ``cfg_scale`` and ``temperature`` left None stand for what ``make_instructable``
-    finds (the checkpoint's agent, the guidance and temperature its export records)."""
+    The agent's guidance and temperature left None stand for what ``make_instructable`` finds
+    (the ones its export records)."""
 
-    agent: str | None
-    checkpoint: str | None
-    cclip: str | None
-    prior: str | None
-    cfg_scale: float | None
-    temperature: float | None
+    agent: AgentSpec
     seed: int
     episodes: int
     max_steps: int
+
+    def record(self) -> dict:
+        """What a saved row and the report say it was played with (the agent's files with
+        their sha256)."""
+        return {"agent": self.agent.record(), "seed": self.seed, "episodes": self.episodes,
+                "max_steps": self.max_steps}
 
 
 def pick_columns(instructions: Sequence[str] | None) -> tuple[SubTask, ...]:
@@ -201,28 +202,16 @@ def make_instructable(
     """The setting's agent (by name, or the one its checkpoint holds) and the setting with its
     name, guidance scale and temperature filled in; ValueError (one line) if it cannot play
     every row of ``columns``."""
-    s = setting
-    for flag, path in (("checkpoint", s.checkpoint), ("cclip", s.cclip), ("prior", s.prior)):
-        if path is not None and not Path(path).exists():
-            raise ValueError(f"--{flag} {path} does not exist")
-    name = s.agent or (checkpoint_kind(s.checkpoint) if s.checkpoint else None)
-    if name is None:
-        raise ValueError("give --agent NAME or --checkpoint PATH")
-    steve = name == "csteve1"
-    if not steve and (s.cclip or s.prior or s.cfg_scale is not None):
-        raise ValueError("--cclip, --prior and --cfg-scale are for C-Steve-1 only")
-    if steve and None in (s.cclip, s.prior):
-        raise ValueError("C-Steve-1 reads its instructions as text: give --cclip and --prior "
-                         "(e.g. weights/cclip_cpu, weights/prior_cpu)")
-    options = {"cclip": s.cclip, "prior": s.prior, "cfg_scale": s.cfg_scale} if steve else {}
-    agent = make_agent(name, num_envs, s.checkpoint, s.temperature, **options)
+    spec = setting.agent
+    spec.require_text()
+    agent = spec.build(num_envs)
     if not hasattr(agent, "instruct"):
-        raise ValueError(f"agent {name!r} does not follow instructions (no instruct method)")
+        raise ValueError(f"agent {spec.kind!r} does not follow instructions (no instruct method)")
     for text in [c.instruction for c in columns] + [None]:
         agent.instruct([text] * num_envs)  # an instruction it cannot follow fails here
-    played = inference_meta(agent, s.temperature)
-    return agent, replace(s, agent=name, cfg_scale=played.get("cfg_scale"),
-                          temperature=played["temperature"])
+    played = inference_meta(agent, spec.temperature)
+    spec = replace(spec, cfg_scale=played.get("cfg_scale"), temperature=played["temperature"])
+    return agent, replace(setting, agent=spec)
 
 
 def check_saved(out: Path, games: Sequence[str], columns: Sequence[SubTask], s: Setting) -> None:
@@ -241,8 +230,8 @@ def load_row(path: Path, setting: Setting) -> list[dict[str, int]] | None:
     if not path.is_file():
         return None
     saved = json.loads(path.read_text())
-    if saved["setting"] != asdict(setting):
-        diff = {k: v for k, v in saved["setting"].items() if asdict(setting).get(k) != v}
+    if saved["setting"] != setting.record():
+        diff = {k: v for k, v in saved["setting"].items() if setting.record().get(k) != v}
         raise ValueError(f"{path} was played with another setting {diff}; give another --out")
     return [e["unlock_step"] for e in saved["episodes"]]
 
@@ -279,7 +268,7 @@ def play_game(
         episodes = play_row(agent, env, None if label == NO_INSTRUCTION else label, setting)
         seconds[label] = round(time.perf_counter() - start, 1)
         path.parent.mkdir(parents=True, exist_ok=True)
-        saved = {"game": game, "instruction": label, "setting": asdict(setting),
+        saved = {"game": game, "instruction": label, "setting": setting.record(),
                  "seconds": seconds[label], "episodes": episodes}
         atomic_write_text(path, json.dumps(saved) + "\n")  # a killed run leaves no half row
         rows[label] = [e["unlock_step"] for e in episodes]
@@ -295,7 +284,7 @@ def run(
     scores the same episodes again, within its first steps: an agent's play does not depend
     on L, so this is the matrix a shorter --max-steps would give, without playing it."""
     report: dict = {
-        "setting": asdict(setting), "columns": [
+        "setting": setting.record(), "columns": [
             {"instruction": c.instruction, "achievement": ACHIEVEMENT_NAMES[c.achievement]}
             for c in columns],
         "rows": row_labels(columns), "games": {},
@@ -324,16 +313,16 @@ def format_markdown(report: dict) -> str:
     """Per game the matrix (k/N and the Wilson 95% interval in %; bold: the row's own
     instruction, italic: the column's best other instruction, if it gets any), each column's
     own instruction against none (``versus_none``) and the verdict line."""
-    s = report["setting"]
-    who = s["agent"] + (f" ({s['checkpoint']})" if s["checkpoint"] else "")
-    guidance = "" if s["cfg_scale"] is None else f", guidance scale {s['cfg_scale']:g}"
+    s, agent = report["setting"], report["setting"]["agent"]
+    who = agent["kind"] + (f" ({agent['checkpoint']})" if "checkpoint" in agent else "")
+    guidance = f", guidance scale {agent['cfg_scale']:g}" if "cfg_scale" in agent else ""
     lines = [
         f"# Instruction matrix: {who}", "",
         (f"{s['episodes']} episodes per row, episode j seeded from ({s['seed']}, j) in every "
          "row; a cell counts the episodes where the column's achievement first happens within "
          f"{s['max_steps']} steps: k/N (Wilson 95%, %). Bold: the row's own instruction; italic: "
          "the column's best other instruction, if it gets any. Temperature "
-         f"{s['temperature']:g}{guidance}."),
+         f"{agent.get('temperature', 1.0):g}{guidance}."),
     ]
     names = [c["achievement"] for c in report["columns"]]
     for game, g in report["games"].items():

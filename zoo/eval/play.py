@@ -17,6 +17,7 @@ import numpy as np
 
 from zoo.envs.base import episode_seed
 from zoo.envs.constants import ACHIEVEMENT_NAMES, ACTION_NAMES
+from zoo.weights.guidance import PAPER_CFG_SCALE
 
 CAPTION_BAR = 14  # pixels of the text bar above each (upscaled) frame
 
@@ -110,13 +111,16 @@ def register(subparsers) -> None:
         "world, side by side in one GIF",
     )
     p.add_argument(
-        "--cclip", default=None, help="C-CLIP .ckpt C-Steve-1 was trained with (text goals)"
+        "--cclip", default=None,
+        help="C-CLIP C-Steve-1 was trained with, which reads the text (default: the one its "
+        "export records)",
     )
-    p.add_argument("--prior", default=None, help="CVAE prior .ckpt (text goals)")
+    p.add_argument("--prior", default=None,
+                   help="CVAE prior, text -> goal (default: the one its export records)")
     p.add_argument(
         "--cfg-scale", type=float,
         help="classifier-free guidance scale (default: the scale its export records, else the "
-        "paper's 1.5)",
+        f"paper's {PAPER_CFG_SCALE})",
     )
     p.add_argument(
         "--temperature", type=float,
@@ -131,25 +135,21 @@ def register(subparsers) -> None:
 
 
 def run_play(args: argparse.Namespace) -> int:
-    from zoo.agents import checkpoint_kind, load_checkpoint_agent
+    from zoo.agents import AgentSpec
     from zoo.envs import make_env
     from zoo.eval.plots import write_gif
 
     instructions = args.instruction or [None]
     try:  # a bad checkpoint is one line naming its file, not a traceback
-        kind = checkpoint_kind(args.checkpoint)
-        if args.instruction and kind != "csteve1":
-            raise ValueError(
-                f"--instruction needs a C-Steve-1 checkpoint; {args.checkpoint} is {kind}"
-            )
-        if args.instruction and (args.cclip is None or args.prior is None):
-            raise ValueError(
-                "--instruction needs --cclip and --prior (text -> C-CLIP -> prior -> goal)"
-            )
-        options = {"cclip": args.cclip, "prior": args.prior, "cfg_scale": args.cfg_scale}
-        agent = load_checkpoint_agent(
-            args.checkpoint, 1, args.temperature, **(options if kind == "csteve1" else {})
-        )
+        spec = AgentSpec(None, args.checkpoint, args.temperature, args.cfg_scale, args.cclip,
+                         args.prior)
+        if args.instruction:
+            if spec.kind != "csteve1":
+                raise ValueError(
+                    f"--instruction needs a C-Steve-1 checkpoint; {args.checkpoint} is {spec.kind}"
+                )
+            spec.require_text()
+        agent = spec.build(1)
     except (ValueError, FileNotFoundError) as err:
         raise SystemExit(f"zoo play: error: {err}") from None
     if args.instruction:

@@ -19,10 +19,10 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
-from zoo.agents import make_agent
+from zoo.agents import AgentSpec
 from zoo.agents.base import Agent
 from zoo.envs.tasks import TASKS, make_task_env
 from zoo.eval.stats import p_text
@@ -56,10 +56,8 @@ class Setting:
     episodes: int
     seed: int
     num_envs: int
-    temperature: float | None  # None: 1, or what the C-Steve-1 export records
-    csteve1: Path | None = None
-    cclip: Path | None = None
-    prior: Path | None = None
+    temperature: float | None  # the C-VPT row's (C-Steve-1's is its spec's)
+    csteve1: AgentSpec | None = None  # C-Steve-1 reading text (its goal models given or its own)
 
     @property
     def batch(self) -> int:
@@ -67,12 +65,11 @@ class Setting:
         return min(self.num_envs, self.episodes)
 
     def steve(self, cfg_scale: float | None) -> Agent:
-        """C-Steve-1 reading text instructions through its C-CLIP and prior (``cfg_scale``
-        None: the scale its export records)."""
-        return make_agent(
-            "csteve1", self.batch, str(self.csteve1), self.temperature, cclip=str(self.cclip),
-            prior=str(self.prior), cfg_scale=cfg_scale,
-        )
+        """C-Steve-1 at guidance ``cfg_scale`` (None: its spec's, else its export's)."""
+        if self.csteve1 is None:
+            raise ValueError("C-Steve-1 rows need --csteve1")
+        spec = self.csteve1 if cfg_scale is None else replace(self.csteve1, cfg_scale=cfg_scale)
+        return spec.build(self.batch)
 
     def cell(
         self, env_name: str, task: str, row: str, agent: Agent, instruction: str | None
@@ -107,9 +104,9 @@ def table(
     ``cvpt``, the C-Steve-1 rows the setting's checkpoints)."""
     agents: dict[str, Agent] = {}
     if "random" in rows:
-        agents["random"] = make_agent("random", setting.batch)
+        agents["random"] = AgentSpec("random").build(setting.batch)
     if "cvpt" in rows:
-        agents["cvpt"] = make_agent("cvpt", setting.batch, str(cvpt), setting.temperature)
+        agents["cvpt"] = AgentSpec("cvpt", cvpt, setting.temperature).build(setting.batch)
     if set(STEVE_ROWS) & set(rows):
         agents["csteve1"] = agents["csteve1_other"] = setting.steve(cfg_scale)
     summary = []

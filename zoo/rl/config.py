@@ -62,8 +62,9 @@ class RLConfig(StrictConfig):
     """PPO-Steve: the C-CLIP that embeds the 61 captions (C-Steve-1's own)."""
     prior: str | None = None
     """PPO-Steve: the CVAE prior turning caption embeddings into goals (its mean goal)."""
-    cfg_scale: float = 1.5
-    """PPO-Steve: C-Steve-1's classifier-free guidance (paper 1.5)."""
+    cfg_scale: float | None = None
+    """PPO-Steve: C-Steve-1's classifier-free guidance (None: what its export records, else
+    the paper's)."""
     option_steps: int = 10
     """PPO-Steve: env steps per chosen caption (paper: 10)."""
     lora_rank: int = 16

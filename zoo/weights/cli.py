@@ -2,7 +2,9 @@
 
 The kind (C-VPT, C-CLIP, CVAE prior, C-Steve-1) comes from the checkpoint's hyper-parameters.
 For C-Steve-1, `--cfg-scale`/`--temperature` record the settings its scores were measured at, so
-`zoo play`, `zoo eval` and `StevePolicy.load` play at them unless told otherwise.
+`zoo play`, `zoo eval` and `StevePolicy.load` play at them unless told otherwise, and
+`--cclip`/`--prior` the goal models that read its text instructions, so it needs no other flag.
+An export folder given as the checkpoint is written again (keeping what it records unless told).
 The older positional form `zoo export CKPT DIR` still works (docs and scripts use it).
 """
 
@@ -10,6 +12,8 @@ from __future__ import annotations
 
 import argparse
 import sys
+
+from zoo.weights.guidance import PAPER_CFG_SCALE
 
 DTYPE_CHOICES = ("float32", "float16", "bfloat16")
 
@@ -27,18 +31,25 @@ def _export(args: argparse.Namespace) -> int:
         export_checkpoint,
         exported_kind,
         inference_settings,
+        recorded_goal_models,
     )
 
     given = {"cfg_scale": args.cfg_scale, "temperature": args.temperature}
+    if (args.cclip is None) != (args.prior is None):
+        return _fail("give --cclip and --prior together")
+    goal_models = None if args.cclip is None else {"cclip": args.cclip, "prior": args.prior}
     try:
         path = export_checkpoint(
-            checkpoint, out, args.dtype, {k: v for k, v in given.items() if v is not None}
+            checkpoint, out, args.dtype, {k: v for k, v in given.items() if v is not None},
+            goal_models, args.copy_goal_models,
         )
     except (FileNotFoundError, ValueError) as err:
         return _fail(str(err))
     kind = exported_kind(path)
     settings = "".join(f", {k} {v:g}" for k, v in inference_settings(path, kind).items())
-    print(f"exported {kind} {checkpoint} -> {path} ({args.dtype}{settings})")
+    goals = recorded_goal_models(path)
+    reads = f"; reads text through {goals['cclip']} and {goals['prior']}" if goals else ""
+    print(f"exported {kind} {checkpoint} -> {path} ({args.dtype}{settings}){reads}")
     return 0
 
 
@@ -55,7 +66,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "C-Steve-1 so it loads with plain torch (zoo.weights.load_model, "
         "or `zoo eval --checkpoint OUT` for the agents).",
     )
-    parser.add_argument("--checkpoint", help="Lightning .ckpt written by `zoo fit`")
+    parser.add_argument("--checkpoint",
+                        help="Lightning .ckpt written by `zoo fit`, or an export folder")
     parser.add_argument("--out", help="folder to write (created if missing)")
     parser.add_argument(
         "--dtype", choices=DTYPE_CHOICES, default="float32",
@@ -64,12 +76,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--cfg-scale", type=float, metavar="X",
         help="C-Steve-1: the classifier-free guidance scale its scores were measured at, "
-        "recorded in config.json as what it plays at (default: the paper's 1.5)",
+        f"recorded in config.json as what it plays at (default: the paper's {PAPER_CFG_SCALE})",
     )
     parser.add_argument(
         "--temperature", type=float, metavar="T",
         help="C-Steve-1: the sampling temperature its scores were measured at, recorded the "
         "same way (default 1; 0: the most likely action)",
+    )
+    parser.add_argument(
+        "--cclip", metavar="DIR",
+        help="C-Steve-1: the C-CLIP export it was trained with; recorded (path and sha256) so "
+        "the export reads text instructions with no other flag",
+    )
+    parser.add_argument("--prior", metavar="DIR",
+                        help="C-Steve-1: the CVAE prior export, recorded the same way")
+    parser.add_argument(
+        "--copy-goal-models", action="store_true",
+        help="copy --cclip and --prior into the export folder, so it can be moved on its own",
     )
     parser.add_argument(
         "paths", nargs="*", metavar="CKPT OUT", help="the same two paths, positionally"

@@ -3,20 +3,26 @@
 An export folder holds ``model.safetensors``, ``config.json`` (the network's config plus
 ``"kind"``: cvpt, cclip, prior or csteve1, the stored ``"dtype"`` and, for a kind that plays with
 settings its weights do not hold, ``"inference"``: C-Steve-1's guidance scale and temperature,
-the ones its scores were measured at) and ``sha256.txt`` (``sha256sum`` format, so
+the ones its scores were measured at; for C-Steve-1, ``"goal_models"``: the C-CLIP and prior its
+text instructions go through, as paths relative to the folder with their sha256) and
+``sha256.txt`` (``sha256sum`` format, so
 ``sha256sum -c sha256.txt`` also checks it). Every model uses this one format and one checksum
 routine; a ``ModelKind`` only says how a training run's hyper-parameters become a config and a
 config a network. A C-VPT export written before kinds existed has no ``"kind"`` and reads as
-cvpt; a C-Steve-1 export written before ``"inference"`` plays at the defaults. Weights may be
+cvpt; a C-Steve-1 export written before ``"inference"`` plays at the defaults, and one written
+before ``"goal_models"`` needs them named (``--cclip``, ``--prior``). Weights may be
 stored as float16/bfloat16 to halve the bytes; loading always gives float32 modules.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
-from collections.abc import Callable
+import os
+import shutil
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +34,7 @@ from zoo.envs.constants import NUM_ACTIONS
 from zoo.files import sha256_file
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.weights.checkpoint_io import ZOO_CHECKPOINT, CheckpointError, read_torch_file
+from zoo.weights.guidance import PAPER_CFG_SCALE
 
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
@@ -35,7 +42,8 @@ CHECKSUM_FILE = "sha256.txt"
 STATE_DICT_PREFIX = "model."  # every lit_models module keeps its network in ``self.model``
 DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
 INFERENCE = "inference"
-RESERVED_KEYS = ("kind", "dtype", INFERENCE)  # config.json keys that are not config fields
+GOAL_MODELS = "goal_models"
+RESERVED_KEYS = ("kind", "dtype", INFERENCE, GOAL_MODELS)  # config.json keys, not config fields
 
 
 def config_from_hparams(hparams: dict[str, Any]) -> CVPTConfig:
@@ -119,6 +127,8 @@ class ModelKind:
     inference: dict[str, float] = dataclasses.field(default_factory=dict)
     """Settings it plays with that its weights do not hold, with the values used where an
     export records none (a ``.ckpt``, an export from before they were recorded)."""
+    goal_models: tuple[str, ...] = ()
+    """The kinds of the models it reads its goals through (C-Steve-1: C-CLIP, the prior)."""
 
 
 KINDS: dict[str, ModelKind] = {
@@ -139,7 +149,7 @@ KINDS: dict[str, ModelKind] = {
     "csteve1": ModelKind(
         "C-Steve-1", "lit_models.csteve1.CSteve1", "zoo.models.steve.SteveModel",
         "backbone_config", _steve_config, _steve_build, _steve_config_of,
-        {"cfg_scale": 1.5, "temperature": 1.0},  # the paper's guidance scale; plain sampling
+        {"cfg_scale": PAPER_CFG_SCALE, "temperature": 1.0}, ("cclip", "prior"),
     ),
 }
 
@@ -204,10 +214,18 @@ def _as_float32(tensor: torch.Tensor) -> torch.Tensor:
 
 
 def checkpoint_sha256(path: str | Path) -> str:
-    """Fingerprint of a model: a .ckpt's own sha256, an export folder's sha256.txt's (which
-    pins its weights and config), so data made from either records what made it."""
+    """Fingerprint of a model, so data and reports made from it record what made it: a
+    file's own sha256, an export folder's sha256.txt's (which pins its weights and config),
+    and for any other folder (a PPO or ``zoo rl train`` run) the sha256 of its files' relative
+    names and sums."""
     path = Path(path)
-    return sha256_file(path / CHECKSUM_FILE if path.is_dir() else path)
+    if not path.is_dir():
+        return sha256_file(path)
+    if (path / CHECKSUM_FILE).is_file():
+        return sha256_file(path / CHECKSUM_FILE)
+    files = sorted(p for p in path.rglob("*") if p.is_file())
+    listing = "".join(f"{sha256_file(p)}  {p.relative_to(path).as_posix()}\n" for p in files)
+    return hashlib.sha256(listing.encode()).hexdigest()
 
 
 def export_checkpoint(
@@ -215,13 +233,25 @@ def export_checkpoint(
     out_dir: str | Path,
     dtype: str = "float32",
     inference: dict[str, float] | None = None,
+    goal_models: Mapping[str, str | Path] | None = None,
+    copy_goal_models: bool = False,
 ) -> Path:
-    """Write the network of any model's Lightning checkpoint as an export folder
-    (``inference``: as for ``save_exported``)."""
-    # building here makes weights and config that disagree fail now, not at load time
-    parts = read_lightning_checkpoint(ckpt_path, expected="a `zoo fit` checkpoint (.ckpt)")
-    network = _build(*parts)
-    return save_exported(network, out_dir, dtype, inference)
+    """Write the network of any model's Lightning checkpoint, or of an export folder (to
+    change how it is stored or what it records), as an export folder. ``inference``,
+    ``goal_models`` and ``copy_goal_models``: as for ``save_exported``; an export folder keeps
+    what it records unless they are given."""
+    source = Path(ckpt_path)
+    if source.is_dir():
+        kind = exported_kind(source)
+        network = load_model(source, kind)
+        inference = {**inference_settings(source, kind), **(inference or {})}
+        if goal_models is None and KINDS[kind].goal_models:
+            goal_models = recorded_goal_models(source)
+    else:
+        # building here makes weights and config that disagree fail now, not at load time
+        parts = read_lightning_checkpoint(source, expected="a `zoo fit` checkpoint (.ckpt)")
+        network = _build(*parts)
+    return save_exported(network, out_dir, dtype, inference, goal_models, copy_goal_models)
 
 
 def _kind_of_model(model: nn.Module) -> str:
@@ -238,19 +268,24 @@ def save_exported(
     out_dir: str | Path,
     dtype: str = "float32",
     inference: dict[str, float] | None = None,
+    goal_models: Mapping[str, str | Path] | None = None,
+    copy_goal_models: bool = False,
 ) -> Path:
     """Write a network as safetensors + config + checksums (what ``load_model`` reads).
 
     ``dtype`` (float32, float16, bfloat16) is how floating-point weights are stored.
     ``inference`` overrides the kind's play settings (C-Steve-1: ``cfg_scale``, ``temperature``)
     with the ones its scores were measured at; config.json records all of them, so the export
-    plays the same even if the defaults change.
+    plays the same even if the defaults change. ``goal_models`` (C-Steve-1: ``cclip`` and
+    ``prior``, export folders) are recorded by path relative to the folder and sha256, or with
+    ``copy_goal_models`` copied into it, so the export reads text instructions on its own.
     """
     if dtype not in DTYPES:
         raise ValueError(f"dtype {dtype!r}: expected one of {sorted(DTYPES)}")
     kind = _kind_of_model(model)
     settings = {**KINDS[kind].inference, **_checked_inference(kind, inference or {})}
     out = Path(out_dir)
+    goals = _checked_goal_models(kind, model, goal_models or {})
     out.mkdir(parents=True, exist_ok=True)
     weights = {
         key: (value.to(DTYPES[dtype]) if value.is_floating_point() else value).contiguous()
@@ -260,6 +295,8 @@ def save_exported(
     config: dict[str, Any] = {"kind": kind, "dtype": dtype}
     if settings:
         config[INFERENCE] = settings
+    if goals:
+        config[GOAL_MODELS] = _write_goal_models(goals, out, copy_goal_models)
     config.update(KINDS[kind].config_of(model))
     (out / CONFIG_FILE).write_text(json.dumps(config, indent=2) + "\n")
     lines = [f"{sha256_file(out / name)}  {name}\n" for name in (WEIGHTS_FILE, CONFIG_FILE)]
@@ -379,3 +416,78 @@ def load_model(
     else:
         model = _build(*read_lightning_checkpoint(path, kind))
     return model.to(map_location)
+
+
+def _checked_goal_models(
+    kind: str, model: nn.Module, goal_models: Mapping[str, str | Path]
+) -> dict[str, Path]:
+    """``goal_models`` as export folders of the kinds ``kind`` reads goals through, all of them
+    or none, the C-CLIP embedding the width the model's goals have; else a ValueError."""
+    wanted = KINDS[kind].goal_models
+    if not goal_models:
+        return {}
+    if not wanted:
+        raise ValueError(f"a {KINDS[kind].title} export records no goal models")
+    if sorted(goal_models) != sorted(wanted):
+        raise ValueError(f"a {KINDS[kind].title} export records its goal models "
+                         f"{list(wanted)} together, got {sorted(goal_models)}")
+    checked = {}
+    for name, path in goal_models.items():
+        path = Path(path)
+        if not path.is_dir():
+            raise ValueError(f"goal model {name} {path}: expected a `zoo export` folder")
+        verify_export(path)
+        if (found := exported_kind(path)) != name:
+            raise ValueError(f"goal model {name} {path} is a {KINDS[found].title} export")
+        checked[name] = path
+    width = read_export_config(checked["cclip"]).get("embed_dim")
+    if width != model.config.goal_dim:
+        raise ValueError(f"the C-CLIP {checked['cclip']} embeds {width} dimensions but this "
+                         f"C-Steve-1 expects goal_dim={model.config.goal_dim}: record the "
+                         "C-CLIP it was trained with")
+    return checked
+
+
+def _write_goal_models(goals: dict[str, Path], out: Path, copy: bool) -> dict[str, dict]:
+    """config.json's record of the goal models: path relative to ``out`` and sha256, after
+    copying them into ``out`` with ``copy``."""
+    record = {}
+    for name, path in goals.items():
+        if copy and path.resolve() != (out / name).resolve():
+            shutil.rmtree(out / name, ignore_errors=True)
+            shutil.copytree(path, out / name)
+            path = out / name
+        record[name] = {"path": os.path.relpath(path.resolve(), out.resolve()),
+                        "sha256": checkpoint_sha256(path)}
+    return record
+
+
+def recorded_goal_models(path: str | Path) -> dict[str, Path] | None:
+    """The goal models a C-Steve-1 export records, checked: each exists and has the sha256
+    the export was written with; None for a ``.ckpt`` or an export that records none."""
+    path = Path(path)
+    if not path.is_dir():
+        return None
+    recorded = read_export_config(path).get(GOAL_MODELS)
+    if recorded is None:
+        return None
+    config = path / CONFIG_FILE
+    if not isinstance(recorded, dict) or not all(
+        isinstance(v, dict) and {"path", "sha256"} <= v.keys() for v in recorded.values()
+    ):
+        raise CheckpointError(f"{config}: {GOAL_MODELS!r} must map each model to "
+                              '{"path": ..., "sha256": ...}')
+    found = {}
+    for name, entry in recorded.items():
+        where = (path / entry["path"]).resolve()
+        if not where.exists():
+            raise CheckpointError(
+                f"{config} records its {name} at {entry['path']} ({where}), which does not "
+                "exist: keep the export beside it, pass --cclip and --prior, or re-export with "
+                "`zoo export --copy-goal-models`")
+        if (actual := checkpoint_sha256(where)) != entry["sha256"]:
+            raise CheckpointError(
+                f"{config} records its {name} {where} with sha256 {entry['sha256']}, but it now "
+                f"has {actual}: other weights than the ones this C-Steve-1 was exported with")
+        found[name] = where
+    return found

@@ -148,21 +148,21 @@ def test_zoo_eval_plays_a_checkpoint_without_agent_name(checkpoint, tmp_path: Pa
 
 def test_temperature_shapes_the_sampled_distribution(checkpoint, monkeypatch) -> None:
     """Actions follow softmax(logits / T); T = 0 always plays the argmax."""
-    from zoo.agents import load_checkpoint_agent
+    from zoo.agents import AgentSpec
 
     n = 500
     logits = torch.linspace(-2.0, 2.0, 17).repeat(n, 1)  # spread: T = 0.5, 1 and 2 differ
     frames = np.broadcast_to(np.zeros((144, 144, 3), np.uint8), (n, 144, 144, 3))
     uniforms = (np.arange(n) + 0.5) / n  # an even grid: frequencies are the CDF's steps
     for temperature in (0.5, 2.0):
-        policy = load_checkpoint_agent(checkpoint[0], n, temperature=temperature).policy
+        policy = AgentSpec(checkpoint=checkpoint[0], temperature=temperature).build(n).policy
         monkeypatch.setattr(policy, "logits", lambda frames, state, first=None: (logits, state))
         actions, _ = policy.act(frames, policy.initial_state(n), uniforms=uniforms)
         frequencies = np.bincount(actions, minlength=17) / n
         expected = torch.softmax(logits[0] / temperature, -1).numpy()
         np.testing.assert_allclose(frequencies, expected, atol=1 / n + 1e-6)
 
-    agent = load_checkpoint_agent(checkpoint[0], n, temperature=0)
+    agent = AgentSpec(checkpoint=checkpoint[0], temperature=0).build(n)
     monkeypatch.setattr(agent.policy, "logits", lambda frames, state, first=None: (logits, state))
     agent.reset(np.arange(n))  # n different sampling streams, all ignored
     step = Step(frames, {}, np.zeros(n, np.float32), np.zeros(n, bool))

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import re
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -113,7 +111,9 @@ def test_dagger_manifest_records_the_round_learner_and_beta(dagger_data, learner
     manifest = json.loads((dagger_data / "manifest.json").read_text())
     dagger = manifest["config"]["dagger"]
     assert dagger["round"] == 2 and dagger["beta"] == 0.25 and dagger["mix"] == "step"
-    assert dagger["learner_sha256"] == checkpoint_sha256(learner)
+    assert dagger["learner"] == {"kind": "cvpt", "checkpoint": str(learner.resolve()),
+                                 "checkpoint_sha256": checkpoint_sha256(learner),
+                                 "temperature": 1.0}
     assert not {"source", "learner", "beta"} & set(manifest["config"])
     for entry in manifest["shards"]:
         assert 0.0 <= entry["dagger"]["learner_agreement"] <= 1.0
@@ -143,27 +143,6 @@ def test_dagger_rerun_is_identical_and_refuses_another_learner(dagger_data, lear
     assert main(_dagger_argv(learner, out, num_envs=1)) == 0
     assert _shas(out) == _shas(dagger_data)  # the bytes depend on the seed, not on --num-envs
     assert main(_dagger_argv(learner, out, beta="0.5")) == 2  # another beta: refused
-
-
-def test_a_dagger_folder_of_the_old_flat_manifest_resumes_and_refuses_expert_play(
-    dagger_data, learner, tmp_path, capsys
-) -> None:
-    """A folder whose manifest holds the DAgger settings flat beside ``source`` (as written
-    before ``GenerationConfig.dagger``) resumes with its own arguments, keeps its shards, and
-    refuses expert play, as a nested one does; `zoo data info` shows its settings."""
-    root = tmp_path / "old"
-    shutil.copytree(dagger_data, root)
-    manifest = json.loads((root / "manifest.json").read_text())
-    manifest["config"].update(source="dagger", **manifest["config"].pop("dagger"))
-    (root / "manifest.json").write_text(json.dumps(manifest))
-    assert main(_dagger_argv(learner, root)) == 0
-    assert _shas(root) == _shas(dagger_data)
-    assert json.loads((root / "manifest.json").read_text())["config"]["dagger"]["beta"] == 0.25
-    capsys.readouterr()
-    assert main(["data", "generate", "--expert", "scripted", *PLAY, "--out", str(root)]) == 2
-    assert re.search(r"dagger: \{.*'round': 2\} there vs None now", capsys.readouterr().err)
-    assert main(["data", "info", str(root)]) == 0
-    assert "DAgger round 2: learner " in capsys.readouterr().out
 
 
 def test_dagger_cli_errors_name_the_argument(tmp_path, capsys) -> None:
@@ -248,10 +227,11 @@ def test_a_steve_learner_is_told_the_schedule_and_its_rollouts_are_reproducible(
     out = tmp_path / "told"
     assert main(_told_argv(steve_learner, out)) == 0
     config = json.loads((out / "manifest.json").read_text())["config"]
-    dagger = config["dagger"]
-    assert dagger["cclip_sha256"] == checkpoint_sha256(steve_learner["cclip"])
-    assert dagger["prior_sha256"] == checkpoint_sha256(steve_learner["prior"])
-    assert dagger["cfg_scale"] is None and config["instructions"]["timeout"] == 20
+    learner = config["dagger"]["learner"]
+    assert learner["kind"] == "csteve1"
+    assert learner["cclip_sha256"] == checkpoint_sha256(steve_learner["cclip"])
+    assert learner["prior_sha256"] == checkpoint_sha256(steve_learner["prior"])
+    assert "cfg_scale" not in learner and config["instructions"]["timeout"] == 20
     commanded = np.concatenate([
         e["instruction"][:-1] for e in iter_episodes(sorted(str(p) for p in out.glob("*.tar")))
     ])
@@ -269,7 +249,7 @@ def test_goal_directed_dagger_cli_names_what_is_missing(
     steve_learner, learner, tmp_path, capsys
 ) -> None:
     for dropped, message in [
-        ("--prior", "a C-Steve-1 learner reads its instructions through --prior"),
+        ("--prior", "give --cclip and --prior together"),
         ("--instructions", "a C-Steve-1 learner needs --instructions"),
     ]:
         argv = _told_argv(steve_learner, tmp_path / dropped.strip("-"))
@@ -280,7 +260,7 @@ def test_goal_directed_dagger_cli_names_what_is_missing(
         assert message in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main([*_dagger_argv(learner, tmp_path / "c"), "--cclip", str(steve_learner["cclip"])])
-    assert "--cclip apply to a C-Steve-1 learner" in capsys.readouterr().err
+    assert "--cclip apply to C-Steve-1 only, not 'cvpt'" in capsys.readouterr().err
 
 
 IDLE = int(Action.NOOP)
@@ -308,7 +288,8 @@ def test_an_idle_learner_is_a_noop_only_where_the_expert_would_idle_too(
     config = GenerationConfig(
         expert="scripted", episodes=1, seed=0, env="crafter", episodes_per_shard=1,
         chunk_length=16, max_steps=30,
-        dagger=DaggerSettings("idle", "0" * 64, 1.0, 0.0, "step"),
+        dagger=DaggerSettings({"kind": "cvpt", "checkpoint": "idle", "checkpoint_sha256": "0" * 64},
+                                  0.0, "step"),
     )
     generate(config, tmp_path, progress=False, build_agent=_idle_learner(label))
     (episode,) = iter_episodes(list_shards(tmp_path))

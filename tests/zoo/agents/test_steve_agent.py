@@ -53,10 +53,10 @@ def test_text_caption_and_clip_goals_have_the_goal_width(goals: GoalEncoder) -> 
 
 
 def test_a_goal_depends_on_the_episode_seed_and_the_text_alone(goals: GoalEncoder) -> None:
-    a = SteveAgent(_policy(), goals, 2)
+    a = SteveAgent(_policy(), 2, goals)
     a.reset(np.array([5, 6]))
     a.instruct(["obtain wood", "obtain wood"])
-    b = SteveAgent(_policy(), goals, 2)
+    b = SteveAgent(_policy(), 2, goals)
     b.instruct(["obtain sapling", None])  # another history before the same episodes
     b.reset(np.array([5, 6]))
     b.instruct(["obtain wood", "obtain wood"])
@@ -81,7 +81,7 @@ def _recorded_logits(agent: SteveAgent) -> list[torch.Tensor]:
 def test_no_instruction_is_the_zero_goal_and_actions_are_sampled_from_the_guided_logits(
     goals: GoalEncoder,
 ) -> None:
-    agent = SteveAgent(_policy(), goals, 3)
+    agent = SteveAgent(_policy(), 3, goals)
     agent.reset(np.array([1, 2, 3]))
     agent.instruct(["obtain wood", None, "place table on grass"])
     assert torch.count_nonzero(agent._goal[1]) == 0
@@ -106,13 +106,13 @@ def test_an_env_reset_mid_batch_acts_as_a_fresh_agent_on_the_same_frames(
 ) -> None:
     """A new episode starts with empty Transformer-XL memory, whatever its env saw before."""
     text = ["obtain wood", "obtain wood"]
-    played = SteveAgent(_policy(), goals, 2)
+    played = SteveAgent(_policy(), 2, goals)
     played.reset(np.array([5, 6]))
     played.instruct(text)
     for seed in range(3):
         played.act(_step(2, seed))
     played.reset(np.array([0, 9]), mask=np.array([False, True]))
-    fresh = SteveAgent(_policy(), goals, 2)
+    fresh = SteveAgent(_policy(), 2, goals)
     fresh.reset(np.array([5, 9]))
     fresh.instruct(text)
     seen_played, seen_fresh = _recorded_logits(played), _recorded_logits(fresh)
@@ -175,4 +175,4 @@ def test_mismatched_goal_width_is_named(goals: GoalEncoder) -> None:
         policy.logits(_step(2).frames, torch.zeros(2, 32), policy.initial_state(2))
     small = GoalEncoder(CCLIPModel(CCLIPConfig.from_name("smoke", embed_dim=32)))
     with pytest.raises(ValueError, match="goal_dim=64"):
-        SteveAgent(policy, small, 1)
+        SteveAgent(policy, 1, small)

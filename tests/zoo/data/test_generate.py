@@ -334,21 +334,6 @@ def test_other_arguments_into_same_folder_are_refused(crafter_dataset, tmp_path)
     assert json.loads((root / "manifest.json").read_text())["config"]["seed"] == 7
 
 
-def test_a_folder_of_the_old_flat_manifest_resumes(crafter_dataset, tmp_path):
-    """A manifest written before ``GenerationConfig.dagger`` (its DAgger fields flat and None,
-    beside ``source: None``) resumes: nothing regenerated, its config rewritten nested."""
-    root = tmp_path / "old"
-    shutil.copytree(crafter_dataset, root)
-    manifest = json.loads((root / "manifest.json").read_text())
-    del manifest["config"]["dagger"]
-    flat = ("source", "learner", "learner_sha256", "learner_temperature", "beta", "mix", "round")
-    manifest["config"].update(dict.fromkeys(flat))
-    (root / "manifest.json").write_text(json.dumps(manifest))
-    generate(CRAFTER, root, progress=False, build_agent=dataset_agent)
-    assert _shas(root) == _shas(crafter_dataset)
-    assert json.loads((root / "manifest.json").read_text())["config"] == dataclasses.asdict(CRAFTER)
-
-
 def test_expert_options_are_part_of_equality_not_of_the_hash():
     scripted = dataclasses.replace(CRAFTER, expert="scripted")
     options = dataclasses.replace(scripted, expert_options={"plants_first": True})

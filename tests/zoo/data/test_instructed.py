@@ -172,7 +172,8 @@ def test_shards_without_instructions_keep_their_format_and_read_as_none(tmp_path
 def test_a_schedule_needs_the_scripted_expert() -> None:
     with pytest.raises(ValueError, match="followed by the scripted expert"):
         dataclasses.replace(INSTRUCTED, expert="random")
-    dagger = DaggerSettings("learner", "sha", 1.0, 0.0, "episode")
+    dagger = DaggerSettings({"kind": "cvpt", "checkpoint": "learner", "checkpoint_sha256": "sha"},
+                            0.0, "episode")
     assert dataclasses.replace(INSTRUCTED, dagger=dagger).dagger == dagger  # goal-directed DAgger
     with pytest.raises(ValueError, match="start_states must be one of"):
         dataclasses.replace(INSTRUCTED, start_states="anywhere")

@@ -74,7 +74,7 @@ def test_agent_is_required_without_a_checkpoint(tmp_path, capsys):
     args = eval_args(tmp_path / "run")
     del args[1:3]
     assert main(args) == 2
-    assert "--agent is required" in capsys.readouterr().err
+    assert "give --agent NAME (one of random" in capsys.readouterr().err
 
 
 @pytest.mark.slow

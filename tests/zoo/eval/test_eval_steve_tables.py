@@ -92,7 +92,7 @@ def test_plain_eval_still_needs_env(tmp_path: Path, capsys: pytest.CaptureFixtur
     [
         (["task-table", "--rows", "cvpt"],
          "the cvpt row needs --cvpt (the unconditioned baseline)"),
-        (["task-table", "--rows", "csteve1"], "C-Steve-1 rows need --csteve1, --cclip and --prior"),
+        (["task-table", "--rows", "csteve1"], "C-Steve-1 rows need --csteve1"),
         (["task-table", "--rows", "cvpt", "--cvpt", "nope"], "--cvpt nope does not exist"),
     ],
 )

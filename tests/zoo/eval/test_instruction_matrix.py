@@ -169,7 +169,7 @@ def test_the_scripted_expert_plays_the_matrix_then_a_rerun_reads_it(
     assert main(argv) == 0
     report = json.loads((out / "report.json").read_text())
     assert report["rows"] == ["obtain sapling", NO_INSTRUCTION]
-    assert report["setting"]["agent"] == "scripted" and report["setting"]["cfg_scale"] is None
+    assert report["setting"]["agent"] == {"kind": "scripted", "temperature": 1.0}
     game = report["games"]["crafter"]
     assert set(game["seconds_played"]) == {"obtain sapling", NO_INSTRUCTION}
     assert game["verdict"]["columns"] == 1 and "crafter: own instruction" in game["verdict_line"]
@@ -209,9 +209,10 @@ def test_the_scripted_expert_plays_the_matrix_then_a_rerun_reads_it(
         (["--agent", "scripted", "--instructions", "obtain diamond"],
          "unknown instruction 'obtain diamond'"),
         (["--agent", "random"], "agent 'random' does not follow instructions"),
-        (["--agent", "scripted", "--cfg-scale", "1"], "are for C-Steve-1 only"),
-        ([], "give --agent NAME or --checkpoint PATH"),
-        (["--checkpoint", "weights/csteve1_cpu"], "give --cclip and --prior"),
+        (["--agent", "scripted", "--cfg-scale", "1"], "apply to C-Steve-1 only"),
+        ([], "give --agent NAME (one of random, scripted"),
+        (["--checkpoint", "weights/csteve1_cpu", "--cclip", "weights/cclip_cpu"],
+         "give --cclip and --prior together"),
         (["--checkpoint", "nope"], "--checkpoint nope does not exist"),
         (["--agent", "scripted", "--max-steps", "50", "--horizons", "60"],
          "--horizons 60: the rows play 50 steps"),

@@ -172,7 +172,7 @@ def test_vector_cvpt_features_masked_reset_keeps_the_other_episode(vector, cvpt)
 
 def steve_goal(cclip, prior, seed: int) -> np.ndarray:
     """The goal ``zoo eval`` gives C-Steve-1 told TEXT in the episode seeded ``seed``."""
-    agent = SteveAgent(StevePolicy.load(SHIPPED / "csteve1_cpu"), GoalEncoder(cclip, prior), 1)
+    agent = SteveAgent(StevePolicy.load(SHIPPED / "csteve1_cpu"), 1, GoalEncoder(cclip, prior))
     agent.reset(np.array([seed]))
     agent.instruct([TEXT])
     return agent._goal[0].numpy()

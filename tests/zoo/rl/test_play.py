@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from zoo.agents import checkpoint_kind, load_checkpoint_agent
+from zoo.agents import AgentSpec, checkpoint_kind
 from zoo.cli import main
 from zoo.envs.base import Step
 from zoo.envs.constants import NUM_ACTIONS
@@ -42,7 +42,7 @@ def test_a_run_folder_plays_its_trained_policy_in_zoo_eval(tmp_path):
     run = tmp_path / "run"
     train_rl(TINY, run, progress=False)
     assert checkpoint_kind(run) == "rl" == checkpoint_kind(list_checkpoints(run)[-1])
-    agent = load_checkpoint_agent(run, num_envs=2)
+    agent = AgentSpec(checkpoint=run).build(2)
     trained = torch.load(list_checkpoints(run)[-1], weights_only=False)["trainable"]
     assert all(torch.equal(agent.policy.state_dict()[k], v) for k, v in trained.items())
     agent.reset(np.array([5, 6]))
@@ -62,11 +62,11 @@ def test_lora_weights_on_a_changed_base_model_are_refused(tmp_path):
     config = TINY.replace(agent="cvpt_rl", checkpoint=str(base), kl_coef=0.1, lora_rank=2)
     run = tmp_path / "run"
     train_rl(config, run, progress=False)
-    agent = load_checkpoint_agent(run, num_envs=2)
+    agent = AgentSpec(checkpoint=run).build(2)
     assert agent.name == "cvpt_rl"
     _tiny_cvpt(tmp_path / "cvpt", seed=1)  # same path, other weights
     with pytest.raises(ValueError, match="trained on other weights"):
-        load_checkpoint_agent(run, num_envs=2)
+        AgentSpec(checkpoint=run).build(2)
     with pytest.raises(ValueError, match="trained on other weights"):
         train_rl(config.replace(total_env_steps=16), run, resume=True, progress=False)
 
