@@ -23,7 +23,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("zoo.agents",),
     ("zoo.goals", "zoo.data", "zoo.captions"),
     ("zoo.weights", "zoo.models", "zoo.experts"),
-    ("zoo.envs", "zoo.argtypes", "zoo.strict_config", "zoo.files"),
+    ("zoo.envs", "zoo.argtypes", "zoo.strict_config", "zoo.files", "zoo.metrics"),
 )
 
 

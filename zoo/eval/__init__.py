@@ -2,7 +2,7 @@
 
 from zoo.eval.report import format_table, summarize, write_report
 from zoo.eval.rollout import EpisodeResult, episode_seed, evaluate
-from zoo.eval.score import ChunkedValue, chunked, crafter_score, normalized_return, success_rates
+from zoo.metrics import ChunkedValue, chunked, crafter_score, normalized_return, success_rates
 from zoo.eval.stats import load_stats, write_stats
 
 __all__ = [

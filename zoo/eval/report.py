@@ -17,7 +17,7 @@ from zoo.envs.constants import ACHIEVEMENT_NAMES
 from zoo.eval.death import death_shares
 from zoo.eval.plots import plot_success_rates, write_gif
 from zoo.eval.rollout import EpisodeResult
-from zoo.eval.score import chunked, crafter_score, normalized_return, success_rates
+from zoo.metrics import chunked, crafter_score, normalized_return, success_rates
 from zoo.eval.stats import write_stats
 
 PAPER_CHUNKS = 5  # the paper: 100 episodes in 5 chunks of 20, mean ± std over chunks

@@ -33,13 +33,9 @@ from zoo.experts.ppo.checkpoint import (
 )
 from zoo.experts.ppo.config import PPOConfig
 from zoo.experts.ppo.train import EpisodeTally, Runner, TrainState, build_trainer, learning_rate
+from zoo.metrics import crafter_score
 
 LOSS_KEYS = ("loss", "policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac")
-
-
-def crafter_score(success_percent: np.ndarray) -> float:
-    """Crafter Score: geometric mean of (1 + success rate in %) minus 1."""
-    return float(np.exp(np.mean(np.log1p(success_percent))) - 1.0)
 
 
 def block_record(config: PPOConfig, update: int, seconds: float, num_updates: int,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from zoo.envs import ACHIEVEMENT_NAMES
-from zoo.eval.score import chunked, crafter_score, normalized_return, success_rates
+from zoo.metrics import chunked, crafter_score, normalized_return, success_rates
 
 WOOD = ACHIEVEMENT_NAMES.index("collect_wood")
 
