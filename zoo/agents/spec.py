@@ -14,6 +14,7 @@ from RL policies) and are imported by name, only when such an agent is asked for
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import importlib
 import math
@@ -23,6 +24,7 @@ from typing import Any
 
 from zoo.agents.base import Agent, RandomAgent
 from zoo.agents.checkpoints import checkpoint_kind
+from zoo.weights.guidance import PAPER_CFG_SCALE
 
 Factory = Callable[["AgentSpec", int], Agent]
 
@@ -206,7 +208,53 @@ class AgentSpec:
         return out
 
     @classmethod
+    def from_args(cls, args: argparse.Namespace) -> AgentSpec:
+        """The spec of the flags ``add_agent_flags`` declared (``--agent`` where declared)."""
+        return cls(getattr(args, "agent", None), args.checkpoint, args.temperature,
+                   args.cfg_scale, args.cclip, args.prior)
+
+    @classmethod
     def from_record(cls, record: Mapping[str, Any]) -> AgentSpec:
         """The spec a ``record()`` describes (its sha256s are what a manifest compares)."""
         fields = {f.name for f in dataclasses.fields(cls)}
         return cls(**{k: v for k, v in record.items() if k in fields})
+
+
+def add_agent_flags(
+    parser: argparse.ArgumentParser,
+    *,
+    agent: str | None = "who plays (default: the agent --checkpoint holds)",
+    checkpoint: str = "a trained agent: C-VPT or C-Steve-1 .ckpt or export, PPO expert run, or "
+    "a `zoo rl train` run folder (its newest checkpoint) or one of its checkpoints/update_*.pt",
+    required: bool = False,
+    temperature: float | None = None,
+) -> None:
+    """Declare the flags of an ``AgentSpec`` (read back by ``AgentSpec.from_args``), once for
+    every command that plays an agent; ``agent`` None leaves out ``--agent`` (the checkpoint
+    says), ``temperature`` is the default temperature (None: 1, or a C-Steve-1 export's)."""
+    group = parser.add_argument_group("agent")
+    if agent is not None:
+        group.add_argument("--agent", choices=AGENT_NAMES, help=agent)
+    group.add_argument("--checkpoint", type=Path, required=required, help=checkpoint)
+    default = ("1, or the temperature a C-Steve-1 export records" if temperature is None
+               else f"{temperature:g}")
+    group.add_argument(
+        "--temperature", type=float, default=temperature,
+        help=f"C-VPT, C-Steve-1, zoo rl agents: sample from softmax(logits / T) (default "
+        f"{default}); 0 plays the most likely action",
+    )
+    group.add_argument(
+        "--cfg-scale", type=float,
+        help="C-Steve-1: classifier-free guidance scale (default: the scale its export "
+        f"records, else the paper's {PAPER_CFG_SCALE}; 0: conditional only)",
+    )
+    group.add_argument(
+        "--cclip", type=Path, metavar="DIR",
+        help="C-Steve-1: the C-CLIP it was trained with, which reads instruction text "
+        "(default: the one its export records)",
+    )
+    group.add_argument(
+        "--prior", type=Path, metavar="DIR",
+        help="C-Steve-1: the CVAE prior, text embedding -> goal (default: the one its export "
+        "records)",
+    )

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from zoo.agents import AGENT_NAMES, AgentSpec
+from zoo.agents.spec import add_agent_flags
 from zoo.argtypes import existing_dir, out_dir, positive_int, shard_range
 from zoo.envs import ENV_NAMES
 from zoo.envs.tasks.starts import START_STATES
@@ -81,9 +82,9 @@ def register(subparsers) -> None:
         "follows a schedule and a C-Steve-1 learner is told the same instruction (goal-directed "
         "DAgger). See docs/dagger.md.",
     )
-    dagger.add_argument("--checkpoint", required=True,
-                        help="the learner: a C-VPT or C-Steve-1 .ckpt from zoo fit or a zoo "
-                        "export folder")
+    add_agent_flags(dagger, agent=None, required=True, temperature=1.0,
+                    checkpoint="the learner: a C-VPT or C-Steve-1 .ckpt from zoo fit or a zoo "
+                    "export folder")
     dagger.add_argument("--expert", choices=("scripted",), default="scripted",
                         help="the labeller (it must read the state)")
     dagger.add_argument("--beta", type=float, default=0.0,
@@ -91,17 +92,11 @@ def register(subparsers) -> None:
     dagger.add_argument("--mix", choices=("episode", "step"), default="episode",
                         help="one beta draw per episode or per step")
     dagger.add_argument("--round", type=int, default=1, help="DAgger round, for the manifest")
-    dagger.add_argument("--temperature", type=float, default=1.0,
-                        help="the learner's sampling temperature")
     dagger.add_argument("--instructions", metavar="captions|subgoals|FILE",
                         help="goal-directed DAgger: the scripted expert follows this schedule "
                         "(as in `generate`) and a C-Steve-1 learner is told the same instruction")
     dagger.add_argument("--instruction-timeout", type=positive_int, default=300, metavar="N",
                         help="actions spent on an instruction before the next is drawn")
-    dagger.add_argument("--cclip", help="a C-Steve-1 learner's C-CLIP checkpoint")
-    dagger.add_argument("--prior", help="a C-Steve-1 learner's CVAE prior checkpoint")
-    dagger.add_argument("--cfg-scale", type=float,
-                        help="a C-Steve-1 learner's guidance scale (default: its export's)")
     _add_play_args(dagger)
     dagger.set_defaults(handler=_dagger, _parser=dagger)
 
@@ -208,8 +203,7 @@ def _learner(args):
     if args.temperature <= 0:
         args._parser.error(f"--temperature must be > 0, got {args.temperature}")
     try:
-        spec = AgentSpec(None, args.checkpoint, args.temperature, args.cfg_scale, args.cclip,
-                         args.prior)
+        spec = AgentSpec.from_args(args)
         if spec.kind not in ("cvpt", "csteve1"):
             raise ValueError(f"--checkpoint {args.checkpoint} holds a {spec.kind} agent; the "
                              "learner must be a C-VPT or C-Steve-1")

@@ -10,7 +10,8 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-from zoo.agents import AGENT_NAMES, AgentSpec
+from zoo.agents import AgentSpec
+from zoo.agents.spec import add_agent_flags
 from zoo.argtypes import existing_dir, non_negative_int, out_dir, positive_int
 from zoo.envs import ENV_NAMES
 from zoo.envs.tasks import SINGLE_STEP_TASKS, TASKS
@@ -62,12 +63,7 @@ def register(subparsers) -> None:
         usage=USAGE,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--agent", choices=AGENT_NAMES, help="who plays (from zoo.agents.AGENT_NAMES)")
-    p.add_argument(
-        "--checkpoint", type=Path,
-        help="a trained agent: C-VPT or C-Steve-1 .ckpt/export, PPO expert run, or a "
-        "`zoo rl train` run folder (its newest checkpoint) or one of its checkpoints/update_*.pt",
-    )
+    add_agent_flags(p)
     # required, but checked by run_eval: the protocols take their own --env (several games)
     p.add_argument("--env", choices=ENV_NAMES, help="game to play in (required)")
     p.add_argument("--episodes", type=positive_int, default=100, help="episodes (default 100)")
@@ -82,26 +78,6 @@ def register(subparsers) -> None:
     p.add_argument(
         "--max-steps", type=positive_int,
         help="episode step limit (default 10000; with --task the task's: 500 single-step, 1000 T1-T4)",
-    )
-    p.add_argument(
-        "--temperature", type=float,
-        help="C-VPT, C-Steve-1, zoo rl agents: sample from softmax(logits / T) (default 1, or "
-        "the temperature a C-Steve-1 export records); 0 plays the most likely action",
-    )
-    p.add_argument(
-        "--cclip", type=Path, metavar="CKPT",
-        help="C-Steve-1: the C-CLIP checkpoint it was trained with, which reads --instruction "
-        "text (default: the one its export records)",
-    )
-    p.add_argument(
-        "--prior", type=Path, metavar="CKPT",
-        help="C-Steve-1: the CVAE prior checkpoint, text embedding -> goal (default: the one "
-        "its export records)",
-    )
-    p.add_argument(
-        "--cfg-scale", type=float,
-        help="C-Steve-1: classifier-free guidance scale (default: the scale its export "
-        f"records, else the paper's {PAPER_CFG_SCALE}; 0: conditional only)",
     )
     p.add_argument("--no-gif", action="store_true", help="skip episode.gif")
     p.add_argument("--overwrite", action="store_true", help="replace a report already in --out")
@@ -158,8 +134,9 @@ def _add_play_args(p: argparse.ArgumentParser, steve_required: bool) -> None:
     _add_episode_args(p)
 
 
-def _add_episode_args(p: argparse.ArgumentParser) -> None:
-    """The games and the episodes every row or cell plays."""
+def _add_episode_args(p: argparse.ArgumentParser, temperature: bool = True) -> None:
+    """The games and the episodes every row or cell plays (and the temperature, unless the
+    agent flags declare it)."""
     p.add_argument("--env", nargs="+", choices=ENV_NAMES, default=list(ENV_NAMES), metavar="GAME",
                    help=f"games: {', '.join(ENV_NAMES)} (default: both)")
     p.add_argument("--episodes", type=positive_int, default=100, help="per cell (default 100)")
@@ -167,9 +144,10 @@ def _add_episode_args(p: argparse.ArgumentParser) -> None:
                    help="episode j of every cell is seeded from (seed, j) (default 0)")
     p.add_argument("--num-envs", type=positive_int, default=20,
                    help="envs played at once (default 20)")
-    p.add_argument("--temperature", type=float,
-                   help="C-VPT and C-Steve-1 sample from softmax(logits / T) (default 1, or the "
-                   "temperature a C-Steve-1 export records)")
+    if temperature:
+        p.add_argument("--temperature", type=float,
+                       help="C-VPT and C-Steve-1 sample from softmax(logits / T) (default 1, or "
+                       "the temperature a C-Steve-1 export records)")
 
 
 def _add_table_args(p: argparse.ArgumentParser) -> None:
@@ -220,8 +198,7 @@ def _build_agent(args: argparse.Namespace, num_envs: int):
     """The spec and agent named by --agent, or, with only --checkpoint, the one the checkpoint
     holds (``zoo.agents.AgentSpec``); on a task it must read instructions as text."""
     try:
-        spec = AgentSpec(args.agent, args.checkpoint, args.temperature, args.cfg_scale,
-                         args.cclip, args.prior)
+        spec = AgentSpec.from_args(args)
         if args.task:
             spec.require_text()
         return spec, spec.build(num_envs)
@@ -421,11 +398,9 @@ def _register_instruction_matrix(protocols) -> None:
     """``zoo eval instructions``: for any instructable agent, named as ``zoo eval`` names it."""
     from zoo.eval import instruction_matrix as matrix
     p = protocols.add_parser("instructions", help=matrix.HELP, description=matrix.DESCRIPTION)
-    p.add_argument("--agent", choices=AGENT_NAMES, help="who plays (scripted: goal-directed)")
-    p.add_argument("--checkpoint", type=Path, help="a trained agent, e.g. a C-Steve-1 export")
-    _add_goal_models(p, required=False)
-    p.add_argument("--cfg-scale", type=float, help="C-Steve-1's guidance (default: its own)")
-    _add_episode_args(p)
+    add_agent_flags(p, agent="who plays (scripted: goal-directed; default: the agent "
+                    "--checkpoint holds)", checkpoint="a trained agent, e.g. a C-Steve-1 export")
+    _add_episode_args(p, temperature=False)
     p.add_argument("--max-steps", type=positive_int, default=200, help="L: steps per episode (200)")
     p.add_argument("--horizons", type=positive_int, nargs="+", default=[], help=matrix.HORIZONS)
     p.add_argument("--instructions", nargs="+", help="some of the default instructions only")
@@ -438,8 +413,7 @@ def run_instruction_matrix(args: argparse.Namespace) -> int:
     from zoo.eval import instruction_matrix as matrix
     num_envs = min(args.num_envs, args.episodes)
     try:
-        spec = AgentSpec(args.agent, args.checkpoint, args.temperature, args.cfg_scale,
-                         args.cclip, args.prior)
+        spec = AgentSpec.from_args(args)
         setting = matrix.Setting(spec, args.seed, args.episodes, args.max_steps)
         columns = matrix.pick_columns(args.instructions)
         agent, setting = matrix.make_instructable(setting, num_envs, columns)

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+from zoo.agents.spec import add_agent_flags
 from zoo.envs.base import episode_seed
 from zoo.envs.constants import ACHIEVEMENT_NAMES, ACTION_NAMES
-from zoo.weights.guidance import PAPER_CFG_SCALE
 
 CAPTION_BAR = 14  # pixels of the text bar above each (upscaled) frame
 
@@ -102,30 +102,12 @@ def register(subparsers) -> None:
             "(OUT/play.json then lists one episode per instruction)."
         ),
     )
-    p.add_argument(
-        "--checkpoint", required=True, help="C-Steve-1 .ckpt (or a C-VPT one, no instruction)"
-    )
+    add_agent_flags(p, agent=None, required=True,
+                    checkpoint="C-Steve-1 .ckpt or export (or a C-VPT one, no instruction)")
     p.add_argument(
         "--instruction", action="append", default=None,
         help='e.g. "obtain wood" (a caption or free text); repeat it to play each on the same '
         "world, side by side in one GIF",
-    )
-    p.add_argument(
-        "--cclip", default=None,
-        help="C-CLIP C-Steve-1 was trained with, which reads the text (default: the one its "
-        "export records)",
-    )
-    p.add_argument("--prior", default=None,
-                   help="CVAE prior, text -> goal (default: the one its export records)")
-    p.add_argument(
-        "--cfg-scale", type=float,
-        help="classifier-free guidance scale (default: the scale its export records, else the "
-        f"paper's {PAPER_CFG_SCALE})",
-    )
-    p.add_argument(
-        "--temperature", type=float,
-        help="sampling temperature (default 1, or the one a C-Steve-1 export records); 0: the "
-        "most likely action",
     )
     p.add_argument("--env", choices=("craftax", "crafter"), default="craftax")
     p.add_argument("--seed", type=int, default=0, help="episode seed (episode 0 of this seed)")
@@ -141,8 +123,7 @@ def run_play(args: argparse.Namespace) -> int:
 
     instructions = args.instruction or [None]
     try:  # a bad checkpoint is one line naming its file, not a traceback
-        spec = AgentSpec(None, args.checkpoint, args.temperature, args.cfg_scale, args.cclip,
-                         args.prior)
+        spec = AgentSpec.from_args(args)
         if args.instruction:
             if spec.kind != "csteve1":
                 raise ValueError(

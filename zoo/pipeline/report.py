@@ -17,7 +17,6 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from zoo.data.manifest import nest_dagger
 from zoo.envs import ENV_NAMES
 
 AGENT_TITLES = {"scripted": "scripted expert", "cvpt": "C-VPT"}
@@ -86,7 +85,7 @@ def _crafterplay(title: str, made_by: str, manifest: dict) -> tuple[str, ...]:
 
 def _rollouts(n: str, manifest: dict) -> tuple[str, ...]:
     """A DAgger round's shards: who played, and how often the learner chose the expert's label."""
-    config, shards = nest_dagger(manifest["config"]), manifest["shards"]
+    config, shards = manifest["config"], manifest["shards"]
     dagger = config["dagger"]
     steps = sum(s["steps"] for s in shards)
     agreed = sum(s["dagger"]["learner_agreement"] * s["steps"] for s in shards) / max(steps, 1)
