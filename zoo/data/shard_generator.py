@@ -18,7 +18,8 @@ import numpy as np
 
 from zoo.data.codec import PLANES_SHAPE, FrameCodec
 from zoo.data.manifest import package_versions
-from zoo.data.noop import noop_counts, noop_flags, noop_runs
+from zoo.data.noop import noop_counts, noop_runs
+from zoo.data.play_modes import DaggerLabels, Instructions, NoInstructions, PlayedActions
 from zoo.data.rerender import renderer_version
 from zoo.data.shards import (
     SHARD_PATTERN,
@@ -34,12 +35,7 @@ from zoo.envs.base import Step, episode_seed
 from zoo.envs.constants import ACHIEVEMENT_NAMES
 from zoo.envs.schema import FRAME_SHAPE
 from zoo.envs.tasks.starts import START_STATES, TaskStartEnv
-from zoo.experts.scripted.schedule import (
-    InstructionSchedule,
-    InstructionScheduler,
-    add_tallies,
-    tally_outcomes,
-)
+from zoo.experts.scripted.schedule import InstructionSchedule
 
 ProgressFn = Callable[[int, int], None]  # (episodes finished, frames recorded) since last call
 AgentBuilder = Callable[["GenerationConfig", int], object]
@@ -188,81 +184,54 @@ class ShardGenerator:
             config.env, self.num_envs, pixels=self.pixels, max_steps=config.max_steps)
         if config.start_states == "tasks":
             self.env = TaskStartEnv(self.env)
-        self.scheduler = None  # tells the expert the schedule's instructions
-        if config.instructions is not None:
-            self.scheduler = InstructionScheduler(config.instructions, self.agent)
+        n = self.num_envs
+        self.labelling = DaggerLabels(self.agent, n) if config.dagger else PlayedActions()
+        self.instructions = (NoInstructions(n) if config.instructions is None
+                             else Instructions(config.instructions, self.agent, n))
         self.versions = package_versions()
         self.renderer = renderer_version() if config.frames == "rendered" else None
         self.buffers = BufferPool()  # recorders' buffers, reused from shard to shard
         self._rows = np.empty((self.num_envs, STATE_ROW_BYTES), np.uint8)
         self._row_fields = state_views(self._rows)  # a step's states, packed once for all envs
+        self._meta = {"env": config.env, "expert": config.expert}  # in every sample's meta.json
+        if config.dagger is not None:
+            self._meta["source"] = "dagger"
+        if self.renderer is not None:
+            self._meta["renderer"] = self.renderer
 
     def run(self, index: int, out: Path, progress: ProgressFn | None = None) -> dict:
         """Play shard ``index``'s episodes, write the shard, return its manifest entry."""
-        cfg = self.config
+        cfg, n = self.config, self.num_envs
         workdir = Path(out) / f".work-{index:06d}-{os.getpid()}"
         shutil.rmtree(workdir, ignore_errors=True)
         workdir.mkdir(parents=True)
         episodes = iter(cfg.shard_episodes(index))
         summaries: dict[int, dict] = {}
-        meta = {"env": cfg.env, "expert": cfg.expert}
-        if cfg.dagger is not None:
-            meta["source"] = "dagger"  # in every sample's meta.json: part of the shard bytes
-        if self.renderer is not None:
-            meta["renderer"] = self.renderer
-        agreed = np.zeros(self.num_envs, np.int64)  # DAgger: learner's action == the label
-        drove = np.zeros(self.num_envs, np.int64)  # DAgger: steps the expert acted
-        recorders: list[EpisodeRecorder | None] = [None] * self.num_envs
-        seeds = np.zeros(self.num_envs, np.int64)
-
+        recorders: list[EpisodeRecorder | None] = [None] * n
+        seeds = np.zeros(n, np.int64)
         path = Path(out) / SHARD_PATTERN.format(index=index)
         with (ShardAssembler(path, cfg.shard_episodes(index)) as assembler,
-              ChunkEncoder(max_pending=self.num_envs + 1, pool=self.buffers) as encoder):
-            # as many as can be in use: a chunk filling per env, and the queued and coding ones
-            in_use = 2 * self.num_envs + 2
-            if self.pixels:  # drawn frames are copied into pooled buffers
-                encoder.submit(self.buffers.prefill, (cfg.chunk_length, *FRAME_SHAPE), in_use)
-            elif self.renderer is None:  # or drawn into one on the encoder
-                encoder.submit(self.buffers.prefill, (cfg.chunk_length, *FRAME_SHAPE), 1)
-            if self.renderer is None:  # and laid out for the codec in one more
-                encoder.submit(self.buffers.prefill, (3, cfg.chunk_length, *PLANES_SHAPE[1:]), 1)
-            encoder.submit(self.buffers.prefill, (cfg.chunk_length, STATE_ROW_BYTES), in_use)
+              ChunkEncoder(max_pending=n + 1, pool=self.buffers) as encoder):
+            self._prefill(encoder)
 
             def start(slot: int) -> bool:
                 episode = next(episodes, None)
-                if episode is None:
-                    recorders[slot] = None
-                    return False
-                seeds[slot] = episode_seed(cfg.seed, episode)
-                recorders[slot] = EpisodeRecorder(
-                    episode, int(seeds[slot]), workdir, cfg.chunk_length, meta, encoder, cfg.codec,
-                    rendered=self.renderer is not None, instructed=self.scheduler is not None,
-                    drawn=self.pixels,
-                )
-                agreed[slot] = drove[slot] = 0
-                return True
+                recorders[slot] = None if episode is None else self._recorder(
+                    episode, seeds, slot, workdir, encoder)
+                return episode is not None
 
-            for slot in range(self.num_envs):
+            for slot in range(n):
                 start(slot)
-            step = self.env.reset(seeds)
-            self.agent.reset(seeds)
-            if self.scheduler is not None:
-                self.scheduler.reset(seeds)
-            self._observe(step, recorders, np.ones(self.num_envs, bool))
+            step = self._reset(seeds, None, recorders)
             frames = 0
             while any(rec is not None for rec in recorders):
                 actions = np.asarray(self.agent.act(step))
-                commanded = self._commanded()
+                commanded = self.instructions.commanded()
                 after = self.env.step(actions)
-                if self.scheduler is not None:
-                    self.scheduler.update(step.state, after.state)
-                labels, noop = self._labels(actions, step, after)
-                if cfg.dagger is not None:
-                    agreed += self.agent.learner_actions == labels
-                    drove += self.agent.expert_drove
-                restart = np.zeros(self.num_envs, bool)
-                rngs = self._state_rngs(after)
-                rows = self._pack(after.state)
+                self.instructions.update(step.state, after.state)
+                labels, noop = self.labelling.labels(actions, step, after)
+                restart = np.zeros(n, bool)
+                rngs, rows = self._state_rngs(after), self._pack(after.state)
                 # python scalars once per step: indexing numpy arrays env by env costs more
                 rewards, dones = np.asarray(after.reward).tolist(), np.asarray(after.done).tolist()
                 per_env = zip(labels.tolist(), rewards, noop.tolist(), commanded.tolist(), strict=True)
@@ -274,24 +243,17 @@ class ShardGenerator:
                     rec.act(label, reward, flag, instruction)
                     rec.observe(_frame(after, slot), None, rngs[slot], rows[slot])
                     frames += 1
-                    if dones[slot]:
-                        # the fragment goes into the shard on the encoder, at its turn
+                    if dones[slot]:  # its fragment goes into the shard on the encoder, in turn
                         summaries[rec.episode] = self._summary(rec, slot, assembler.add_blocks)
-                        if cfg.dagger is not None:
-                            summaries[rec.episode]["dagger"] = (int(agreed[slot]), int(drove[slot]))
                         if progress:
                             progress(1, frames)
                             frames = 0
                         restart[slot] = start(slot)
                 step = after
                 if restart.any():
-                    fresh = self.env.reset(seeds, mask=restart)
-                    self.agent.reset(seeds, mask=restart)
-                    if self.scheduler is not None:
-                        self.scheduler.reset(seeds, restart)
-                    done = after.done & ~restart
-                    step = Step(fresh.frames, fresh.state, after.reward, done, fresh.raw)
-                    self._observe(step, recorders, restart)
+                    fresh = self._reset(seeds, restart, recorders)
+                    step = Step(fresh.frames, fresh.state, after.reward, after.done & ~restart,
+                                fresh.raw)
                 if progress and frames >= 1024:
                     progress(0, frames)
                     frames = 0
@@ -304,24 +266,39 @@ class ShardGenerator:
         shutil.rmtree(workdir, ignore_errors=True)
         return self._entry(index, path, sha, [summaries[e] for e in order])
 
-    def _labels(self, actions: np.ndarray, step: Step, after: Step) -> tuple[np.ndarray, np.ndarray]:
-        """The actions to store and their noop flags.
+    def _prefill(self, encoder: ChunkEncoder) -> None:
+        """Pool the buffers the frame mode needs, as many as can be in use at once: a chunk
+        filling per env, and the queued and coding ones."""
+        chunk, in_use = self.config.chunk_length, 2 * self.num_envs + 2
+        if self.pixels:  # drawn frames are copied into pooled buffers
+            encoder.submit(self.buffers.prefill, (chunk, *FRAME_SHAPE), in_use)
+        elif self.renderer is None:  # or drawn into one on the encoder
+            encoder.submit(self.buffers.prefill, (chunk, *FRAME_SHAPE), 1)
+        if self.renderer is None:  # and laid out for the codec in one more
+            encoder.submit(self.buffers.prefill, (3, chunk, *PLANES_SHAPE[1:]), 1)
+        encoder.submit(self.buffers.prefill, (chunk, STATE_ROW_BYTES), in_use)
 
-        Expert play stores what was played. DAgger stores the expert's label of each visited
-        state; a step counts as a noop only when the played action had no effect and was the
-        label too, so states where the learner idles keep the expert's way out.
-        """
-        noop = noop_flags(actions, step.state, after.state)
-        if self.config.dagger is None:
-            return actions, noop
-        labels = self.agent.labels
-        return labels, noop & (labels == actions)
+    def _recorder(
+        self, episode: int, seeds: np.ndarray, slot: int, workdir: Path, encoder: ChunkEncoder
+    ) -> EpisodeRecorder:
+        """Env ``slot`` starts ``episode``: its seed goes into ``seeds``; its recorder."""
+        cfg = self.config
+        seeds[slot] = episode_seed(cfg.seed, episode)
+        self.labelling.start(slot)
+        return EpisodeRecorder(
+            episode, int(seeds[slot]), workdir, cfg.chunk_length, self._meta, encoder, cfg.codec,
+            rendered=self.renderer is not None, instructed=cfg.instructions is not None,
+            drawn=self.pixels,
+        )
 
-    def _commanded(self) -> np.ndarray:
-        """The caption id each env's next action pursues (-1 everywhere without a schedule)."""
-        if self.scheduler is None:
-            return np.full(self.num_envs, -1, np.int16)
-        return self.scheduler.ids
+    def _reset(self, seeds: np.ndarray, mask: np.ndarray | None, recorders: list) -> Step:
+        """New episodes where ``mask`` (None: everywhere): env, agent and schedule reset, and
+        the first frames recorded."""
+        step = self.env.reset(seeds, mask=mask)
+        self.agent.reset(seeds, mask=mask)
+        self.instructions.reset(seeds, mask)
+        self._observe(step, recorders, np.ones(self.num_envs, bool) if mask is None else mask)
+        return step
 
     def _state_rngs(self, step: Step) -> np.ndarray | list[None]:
         """Per env, Craftax's ``state_rng`` (rendered frames, and frames the env did not draw,
@@ -345,7 +322,7 @@ class ShardGenerator:
 
     def _summary(self, rec: EpisodeRecorder, slot: int, sink: FragmentSink) -> dict:
         """Finish the episode (its fragment to ``sink``), keep what the manifest reports."""
-        segments = None if self.scheduler is None else self.scheduler.finish(slot)
+        segments = self.instructions.finish(slot)
         written = rec.finish(None if segments is None else {"instructions": segments}, sink)
         noop = np.asarray(rec.noop, bool)
         actions = np.asarray(rec.actions)
@@ -358,6 +335,7 @@ class ShardGenerator:
             "achievements": rec.final_state["achievements"].astype(bool),
             "return": float(np.sum(rec.rewards)),
             "instructions": segments,
+            **self.labelling.finish(slot),
         }
 
     def _entry(self, index: int, path: Path, sha: str, episodes: list[dict]) -> dict:
@@ -370,15 +348,7 @@ class ShardGenerator:
         extra = {}
         if self.renderer is not None:
             extra["renderer"] = self.renderer
-        if cfg.instructions is not None:
-            tallies = [tally_outcomes(e["instructions"], cfg.instructions) for e in episodes]
-            extra["instructions"] = add_tallies(tallies)
-        if cfg.dagger is not None:
-            steps = sum(e["length"] for e in episodes)
-            extra["dagger"] = {
-                "learner_agreement": sum(e["dagger"][0] for e in episodes) / max(steps, 1),
-                "expert_share": sum(e["dagger"][1] for e in episodes) / max(steps, 1),
-            }
+        extra |= self.instructions.entry(episodes) | self.labelling.entry(episodes)
         return {
             **extra,
             "file": path.name,
