@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 import yaml
 
@@ -182,6 +183,31 @@ def axis_value(record: dict, axis: str) -> float:
             "horizon": record["max_steps"]}[axis]
 
 
+def axis_means(results: dict, axis: str, game: str) -> dict[float, list[float]]:
+    """Per point on ``axis``: the Crafter Scores in ``game`` of its seeds."""
+    out: dict[float, list[float]] = {}
+    for record in results["cells"].values():
+        if axis in record["axes"] and game in record["scores"]:
+            out.setdefault(axis_value(record, axis), []).append(
+                record["scores"][game]["crafter_score"])
+    return dict(sorted(out.items()))
+
+
+def log_fit(points: dict[float, list[float]], at: float) -> dict[str, float]:
+    """Least squares of score = a + b log10(x) over every seed's score (each seed one sample),
+    and its value at ``at``: the slope per tenfold x and what it extrapolates to. Needs two
+    distinct x."""
+    xs = np.log10([x for x, ys in points.items() for _ in ys])
+    ys = np.array([y for values in points.values() for y in values])
+    if len(set(xs.tolist())) < 2:
+        raise ValueError(f"a log fit needs two distinct x, got {sorted(points)}")
+    slope, intercept = np.polyfit(xs, ys, 1)
+    residual = ys - (intercept + slope * xs)
+    return {"per_tenfold": float(slope), "intercept": float(intercept),
+            "rms_residual": float(np.sqrt(np.mean(residual**2))), "at": at,
+            "extrapolated": float(intercept + slope * np.log10(at))}
+
+
 def plot(results: dict, out: Path) -> None:
     """One panel per axis: each seed's Crafter Score per game (dots) and their mean (line)."""
     import matplotlib
@@ -226,6 +252,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--list", action="store_true", help="print the cells and their state")
     parser.add_argument("--plot", type=Path, nargs="?", const=PLOT, metavar="PNG",
                         help=f"draw the curves from --out (default {PLOT}) and stop")
+    parser.add_argument("--fit", type=float, nargs="?", const=180e6, metavar="FRAMES",
+                        help="print each game's log-linear fit of score against frames and its "
+                        "value at FRAMES (default the paper's 180M), and stop")
     args = parser.parse_args(argv)
     plan = load_plan(args.plan)
     results: dict[str, Any] = (json.loads(args.out.read_text()) if args.out.exists()
@@ -233,6 +262,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.plot:
         plot(results, args.plot)
         print(f"wrote {args.plot}")
+        return 0
+    if args.fit:
+        for game in results["plan"]["eval"]["games"]:
+            points = {x * 1e6: ys for x, ys in axis_means(results, "frames", game).items()}
+            print(game, json.dumps(log_fit(points, args.fit)))
         return 0
     todo = [c for c in cells(plan) if c.name not in results["cells"]]
     if args.only:

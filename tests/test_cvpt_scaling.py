@@ -8,6 +8,7 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -94,3 +95,15 @@ def test_a_tiny_cell_runs_end_to_end_and_a_rerun_skips_it(tmp_path: Path, monkey
     assert out.read_text() == before
     assert scaling.main([*args, "--plot", str(tmp_path / "curves.png")]) == 0
     assert (tmp_path / "curves.png").stat().st_size > 0
+
+
+def test_the_log_fit_matches_a_hand_computed_line() -> None:
+    """Scores 10 and 20 at 1M and 10M frames (one seed each), 16 and 14 at 10M (two seeds):
+    the least-squares line through (6, 10), (7, 16), (7, 14) is 10 + 5 per tenfold, so 180M
+    frames (log10 = 8.255) extrapolate to 10 + 5 * 2.255 = 21.28."""
+    fit = scaling.log_fit({1e6: [10.0], 1e7: [16.0, 14.0]}, 180e6)
+    assert fit["per_tenfold"] == pytest.approx(5.0)
+    assert fit["extrapolated"] == pytest.approx(10 + 5 * (np.log10(180e6) - 6))
+    assert fit["rms_residual"] == pytest.approx(np.sqrt(2 / 3))
+    with pytest.raises(ValueError, match="two distinct x"):
+        scaling.log_fit({1e6: [1.0, 2.0]}, 1e8)
