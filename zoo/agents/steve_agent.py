@@ -150,16 +150,21 @@ class StevePolicy:
         self.goal_models, self.export = goal_models, export
         self._rng = np.random.default_rng(seed)
 
-    @cached_property
-    def goals(self) -> GoalEncoder:
-        """Text -> goal through ``goal_models`` (loaded when first asked for: C-CLIP's text
-        tower is slow to import and a policy given video goals never needs it)."""
+    def goal_model_paths(self) -> dict[str, str | Path]:
+        """The C-CLIP and prior it reads text with: the ones given, else its export's."""
         models = self.goal_models
         if models is None and self.export is not None:
             models = recorded_goal_models(self.export)
         if models is None:
             raise ValueError("this C-Steve-1 has no goal models, so it cannot read text: give "
                              "--cclip and --prior")
+        return models
+
+    @cached_property
+    def goals(self) -> GoalEncoder:
+        """Text -> goal through ``goal_models`` (loaded when first asked for: C-CLIP's text
+        tower is slow to import and a policy given video goals never needs it)."""
+        models = self.goal_model_paths()
         goals = GoalEncoder.load(models["cclip"], models["prior"])
         if goals.goal_dim != self.goal_dim:
             raise ValueError(

@@ -48,8 +48,10 @@ def load_executor(config: RLConfig):
     from zoo.agents.steve_agent import GoalEncoder, StevePolicy
     from zoo.captions.vocabulary import load_vocabulary
 
-    steve = StevePolicy.load(config.checkpoint, config.device, cfg_scale=config.cfg_scale)
-    encoder = GoalEncoder.load(config.cclip, config.prior, sample_prior=False)
+    steve = StevePolicy.load(config.checkpoint, config.device, cfg_scale=config.cfg_scale,
+                             cclip=config.cclip, prior=config.prior)
+    models = steve.goal_model_paths()  # the config's, else the ones its export records
+    encoder = GoalEncoder.load(models["cclip"], models["prior"], sample_prior=False)
     return steve, encoder.from_caption_ids(list(range(len(load_vocabulary().texts()))))
 
 

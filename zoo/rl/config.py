@@ -59,9 +59,11 @@ class RLConfig(StrictConfig):
     checkpoint: str | None = None
     """C-VPT (``cvpt_rl``) or C-Steve-1 (``ppo_steve``) checkpoint or export folder."""
     cclip: str | None = None
-    """PPO-Steve: the C-CLIP that embeds the 61 captions (C-Steve-1's own)."""
+    """PPO-Steve: the C-CLIP that embeds the 61 captions (C-Steve-1's own; None: the one its
+    export records)."""
     prior: str | None = None
-    """PPO-Steve: the CVAE prior turning caption embeddings into goals (its mean goal)."""
+    """PPO-Steve: the CVAE prior turning caption embeddings into goals (its mean goal; None:
+    the one its export records)."""
     cfg_scale: float | None = None
     """PPO-Steve: C-Steve-1's classifier-free guidance (None: what its export records, else
     the paper's)."""
@@ -101,10 +103,13 @@ class RLConfig(StrictConfig):
                 f"RLConfig.device={self.device!r}: zoo rl runs on cpu only so far (its rollout "
                 "buffers live on the CPU); set device: cpu"
             )
-        needs = {"cvpt_rl": ("checkpoint",), "ppo_steve": ("checkpoint", "cclip", "prior")}
+        needs = {"cvpt_rl": ("checkpoint",), "ppo_steve": ("checkpoint",)}
         missing = [k for k in needs.get(self.agent, ()) if getattr(self, k) is None]
         if missing:
             raise ValueError(f"RLConfig: agent {self.agent!r} needs {missing} set")
+        if (self.cclip is None) != (self.prior is None):
+            raise ValueError("RLConfig: set cclip and prior together (or neither: the ones the "
+                             "C-Steve-1 export records)")
 
     @property
     def env_steps_per_update(self) -> int:

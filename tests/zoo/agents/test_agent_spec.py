@@ -160,3 +160,14 @@ def test_the_guidance_default_is_the_papers_and_an_export_keeps_its_own(tmp_path
     assert StevePolicy.load(bare).cfg_scale == PAPER_CFG_SCALE
     spec = dataclasses.replace(AgentSpec(checkpoint=STEVE), cfg_scale=2.0)
     assert spec.build(1).inference == {"cfg_scale": 2.0, "temperature": 1.0}
+
+
+def test_ppo_steve_reads_the_captions_through_the_exports_goal_models() -> None:
+    from zoo.rl.agents import load_executor
+    from zoo.rl.config import RLConfig
+
+    base = RLConfig(agent="ppo_steve", task="T1", checkpoint=str(STEVE))
+    steve, goals = load_executor(base)
+    told = load_executor(dataclasses.replace(base, cclip=str(CCLIP), prior=str(PRIOR)))[1]
+    assert goals.shape == (61, 64)
+    np.testing.assert_array_equal(goals.numpy(), told.numpy())

@@ -36,8 +36,11 @@ def test_bad_values_name_the_field():
         RLConfig.from_dict(base | {"agent": "dqn"})
     with pytest.raises(ValueError, match="divisible by num_minibatches"):
         RLConfig.from_dict(base | {"num_envs": 6, "num_minibatches": 4})
-    with pytest.raises(ValueError, match=r"needs \['checkpoint', 'cclip', 'prior'\]"):
+    with pytest.raises(ValueError, match=r"needs \['checkpoint'\]"):
         RLConfig.from_dict(base | {"agent": "ppo_steve", "checkpoint": None, "cclip": None,
+                                   "prior": None})
+    with pytest.raises(ValueError, match="set cclip and prior together"):
+        RLConfig.from_dict(base | {"agent": "ppo_steve", "checkpoint": "c", "cclip": "x",
                                    "prior": None})
     with pytest.raises(ValueError, match="cpu only"):
         RLConfig.from_dict(base | {"device": "cuda"})
