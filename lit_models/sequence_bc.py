@@ -8,7 +8,7 @@ stop-gradient. How often the optimizer steps is ``update_every``:
   forward, backward and one optimizer step per window, so one step sees batch x tbptt_len
   frames (128 x 64 = 8,192 at the paper's sizes) and a 640-step batch makes 10 steps. The
   memory carried into the next window was made by the weights before the step.
-- ``batch`` (a departure, kept for comparison and for the CPU recipes' history): the loss is
+- ``batch`` (a departure from the paper, to compare against per-window stepping): the loss is
   the mean over every step of the batch and the optimizer steps once per batch. Its gradient
   is the whole batch's, window-by-window memory included; with ``activation_checkpointing``
   each window is recomputed during backward, so activation memory is one window's, not the

@@ -95,8 +95,8 @@ def _stdout_reader_gone() -> bool:
 def _run(argv: list[str]) -> int:
     if argv and argv[0] in TRAIN_VERBS:
         # Before torch loads OpenMP: its threads sleep at a barrier instead of spinning, so
-        # they do not take the cores the DataLoader workers need (+7-9% in an A/B of the
-        # tile recipe's `zoo fit` on 2 cores; docs/results/cvpt.md). A set policy is kept.
+        # they do not take the cores the DataLoader workers need (docs/results/cvpt.md has
+        # the A/B). A set policy is kept.
         os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
         from lit_models.cli import DataNotFoundError, run_lightning_cli
         from zoo.weights.checkpoint_io import CheckpointError

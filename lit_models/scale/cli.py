@@ -20,8 +20,8 @@ fits an RTX 4090 (24 GB), A6000 (48 GB) and H100 (80 GB), GPU-hours at 30% and 1
 the paper's reported hours, DataLoader workers per GPU in both frame modes, and disk for the
 paper's 180M frames. Writes DIR/scale.json (every number, marked measured, assumed or
 projected; per stage: measured, projected.memory_at_batch, .fit, .gpu_hours, .paper,
-.loading, .cpu_check) and DIR/scale.md (the same to read). Takes ~3 minutes on 2 idle cores
-(~8 on a busy one); --quick with its 2 stages under a minute. Stages (configs/<stage>.yaml):
+.loading, .cpu_check) and DIR/scale.md (the same to read). --quick skips the warm-up steps
+and measures 2 stages, for tests and dry runs. Stages (configs/<stage>.yaml):
 """ + ", ".join(STAGES) + "."
 
 

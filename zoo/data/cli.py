@@ -137,7 +137,7 @@ def _add_play_args(parser: argparse.ArgumentParser) -> None:
                         help="episodes played at once")
     parser.add_argument("--frames", choices=("stored", "rendered"), default="stored",
                         help="stored: frames as images; rendered (--env craftax only): residuals "
-                        "against re-renders from the stored state, ~1/100 the bytes, "
+                        "against re-renders from the stored state, far fewer bytes, "
                         "re-rendered when read (docs/data.md)")
     parser.add_argument("--shards", type=shard_range,
                         help="A:B: write only shards A..B-1 (one task of a job array; join the "

@@ -1,15 +1,15 @@
 """Byte encodings of one CrafterPlay sample: lossless frames, npy array streams, JSON meta.
 
 Frames (both games draw them from 16-pixel textures, then blend in daylight and, at night,
-grey random static) are stored as zstd of a reversible re-layout, measured on scripted
+grey random static) are stored as zstd of a reversible re-layout, chosen on scripted
 Craftax play, random Craftax and random crafter play (docs/data.md):
 - channels decorrelated to (R, G-R, B-G) mod 256: the static is grey, so only R keeps it
-  (night frames 22.9 -> 16.7 KB);
+  and night frames shrink;
 - channel-planar over the chunk, and tile-major inside a plane (each 16x16 block contiguous),
   so a repeated tile is one long zstd match; a 32 MB window spans a 256-step chunk.
-The re-layout is one numba pass per frame (``tile_frames``: ~6 us a frame alone, ~17 beside
-play; the numpy transposes, differences and copies it replaced took ~45), so a recorder lays
-each frame out as it arrives and its encoder thread only runs zstd (which releases the GIL).
+The re-layout is one numba pass per frame (``tile_frames``, a fraction of the cost of numpy
+transposes, differences and copies), so a recorder lays each frame out as it arrives and its
+encoder thread only runs zstd (which releases the GIL).
 Arrays are a stream of ``.npy`` records read back with ``allow_pickle=False``: no pickle.
 """
 
@@ -39,7 +39,7 @@ class FrameCodec:
     """zstd settings for frames and arrays.
 
     Args:
-        level: zstd level; 2 is ~1.7x faster than 3 for 1.6% more bytes on scripted play.
+        level: zstd level; 2 encodes faster than 3 for a few more bytes on scripted play.
         window_log: log2 of the match window; 25 (32 MB) spans a 256-step chunk of frames.
     """
 
@@ -95,7 +95,7 @@ def _tile_loop(frames, planes, offset):
         )
 
 
-# A frame takes ~6 us: a call that let go of the GIL for it would hand the GIL to a waiting
+# A frame takes microseconds: a call that let go of the GIL for it would hand the GIL to a waiting
 # thread and wait to get it back (up to the 5 ms switch interval). Batches of frames do.
 _tile_frames = numba.njit(cache=True, boundscheck=False)(_tile_loop)
 _tile_frames_nogil = numba.njit(cache=True, nogil=True, boundscheck=False)(_tile_loop)
@@ -172,8 +172,8 @@ def encode_frames(
 @numba.njit(cache=True, nogil=True, boundscheck=False)
 def _untile_frames(planes, frames):
     """``tile_frames`` undone: (3, n, 9, 9, 16, 16) planes of (R, G-R, B-G) into (n, 144, 144,
-    3) frames, one pass in the frames' order (the numpy transposes it replaced took ~6x as
-    long, a third of a training loader's time)."""
+    3) frames, one pass in the frames' order (numpy transposes would take several times as
+    long, a large share of a training loader's time)."""
     for i in range(planes.shape[1]):
         for row in range(_GRID):
             for y in range(TILE):

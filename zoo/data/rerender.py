@@ -39,8 +39,8 @@ from zoo.envs.schema import FRAME_SHAPE, State
 
 RENDER_BATCH = 16
 """Frames per re-render call: a block still in the cache when its residual and CRC32 are
-taken; for JAX also one compiled shape for every chunk length (the tail is padded; on a
-2-core CPU 16 renders ~1,800 frames/s, 64 half that: the intermediates leave the cache)."""
+taken; for JAX also one compiled shape for every chunk length (the tail is padded; larger
+batches render slower: the intermediates leave the cache)."""
 
 
 def renderer_version(renderer: str | None = None) -> str:

@@ -56,7 +56,7 @@ def _state_layout() -> tuple[dict[str, tuple[int, int]], int]:
 
 _STATE_LAYOUT, STATE_ROW_BYTES = _state_layout()
 """A step's exported state packed in one row of bytes: a recorder copies an observation in one
-assignment instead of one per field (~15 us each), the generator packing its envs' states
+assignment instead of one per field, the generator packing its envs' states
 together (``state_views``)."""
 
 
@@ -127,7 +127,7 @@ class BufferPool:
     shards, when a generator keeps its pool). A fresh buffer page-faults on its first fill;
     buffers are plain anonymous maps, not numpy's (numpy advises huge pages for arrays of
     4 MB and more, and where the kernel then compacts memory to find them, a 16 MB buffer's
-    first fill took 50-200 ms on the 2-core box, against ~6 ms in 4 KB pages). It holds at
+    first fill is many times slower than in 4 KB pages). It holds at
     most the most buffers ever in use at once (at L=256 and 8 envs: 8 filling, up to 9
     queued, one coding, and the layout buffer: ~300 MB, kept between shards)."""
 
@@ -173,7 +173,7 @@ class ChunkEncoder(ThreadPoolExecutor):
     ``submit_chunk`` blocks while ``max_pending`` chunks wait, so raw chunks queued for
     compression (16 MB each at L=256) stay bounded when the encoder is slower than the envs.
     Other jobs (fragment writes, shard appends) hold no buffer and never block: taking slots
-    too, their bursts at episodes' ends stalled play (~3% of the stored mode's time).
+    too, their bursts at episodes' ends would stall play.
     Recorders take their buffers from ``pool`` (a new one by default), given back once coded.
     """
 

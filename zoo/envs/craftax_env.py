@@ -34,7 +34,7 @@ BLOCK_PIXELS = 16
 
 
 def enable_compilation_cache(path: str | None = None) -> None:
-    """Reuse compiled XLA programs across processes (compiling step+render takes ~20 s on CPU)."""
+    """Reuse compiled XLA programs across processes (compiling step+render is slow on a CPU)."""
     import jax
 
     cache = path or os.environ.get(

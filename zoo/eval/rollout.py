@@ -157,7 +157,7 @@ def evaluate(
 
     results: list[EpisodeResult] = []
     # the rate is timed from the end of the first step, which compiles Craftax's step (seconds):
-    # counted from the start, a short evaluation showed steps_per_s=0 to its end
+    # counted from the start, a short evaluation would show steps_per_s=0 to its end
     env_steps, started, shown = 0, None, 0.0
     bar = tqdm(total=episodes, unit="ep", desc=f"eval {env.name}", disable=not progress)
     try:

@@ -194,7 +194,7 @@ def write_summary(out: Path, mode: str, rows: list[dict]) -> list[Path]:
 
 
 def versus_cvpt(rows: list[dict]) -> list[str]:
-    """Per game, the issue's test: on how many tasks the instructed C-Steve-1 beats the
+    """Per game, the verdict: on how many tasks the instructed C-Steve-1 beats the
     unconditioned C-VPT, on how many with disjoint Wilson 95% intervals, and each task's
     two-proportion p-value (38/50 vs 27/50: intervals overlap, yet p = 0.021)."""
     lines = []

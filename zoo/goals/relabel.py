@@ -25,7 +25,7 @@ Our reading of it, step by step, from the first step t of a piece:
    training sequences instead.
 Taking the *first* segment in the window is what keeps one goal from spanning two events: the
 steps before "place table" are labelled with the table, not with the pickaxe made just after.
-Its cost, measured (docs/results/csteve1.md, C-Steve-1): "craft stone pickaxe" then labels only steps
+Its cost (docs/results/csteve1.md, C-Steve-1): "craft stone pickaxe" then labels only steps
 where a table already stands, so the goal means "craft now" and a task that starts without a
 table is outside what it was trained on. ``event_any`` keeps goals inside event segments but
 lets the pickaxe also label the run-up that places the table.

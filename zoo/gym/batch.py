@@ -11,7 +11,7 @@ Gymnasium needs and the zoo's batched interface lacks:
 - **terminated vs truncated.** Death (health 0, or lava in Craftax) and task success terminate;
   the step limit truncates. The game itself runs with a limit of at least ``GAME_LIMIT`` and the
   limit is enforced here, so every Craftax env shares one compiled program whatever its task
-  (a limit is a constant inside the jitted step: 3 limits cost 3 compiles of ~20 s). The game's
+  (a limit is a constant inside the jitted step: 3 limits would cost 3 compiles). The game's
   limit only ends the episode, so enforcing it here gives the same episodes.
 - **Observations.** 144-px frames, 72-px frames (the 2x2 mean, what C-VPT's
   ``input_downsample=2`` sees), Craftax-Classic's symbolic vector, or pixels and symbolic as a

@@ -68,8 +68,8 @@ class TileEncoder(nn.Module):
         ``embed`` is applied as one matmul over these rows with its weight scaled by 1/255:
         the same function as the strided convolution on frames / 255, but the patches are cut
         from the uint8 frames and cast once (under bf16 autocast straight to bf16, where 0-255
-        are exact), which on a CPU is ~4x cheaper than converting, dividing and convolving the
-        144-px float frame (an A/B of the two on one 512-frame batch; docs/results/cvpt.md)."""
+        are exact), which on a CPU is cheaper than converting, dividing and convolving the
+        144-px float frame (docs/results/cvpt.md has the A/B)."""
         n, patch, size = frames.shape[0], self.patch, self.grid
         x = frames
         if self.downsample > 1:

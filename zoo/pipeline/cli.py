@@ -45,8 +45,8 @@ def register(subparsers) -> None:
     p.add_argument("--out", required=True, type=Path, help="folder of every output and the report")
     p.add_argument("--dry-run", action="store_true",
                    help="a suite config at its model sizes and sequence shapes on a few episodes "
-                   "on the CPU, each fit 2 steps, then `zoo scale` (pipeline_paper.yaml: 21 min on "
-                   "2 busy cores); docs/pipeline.md lists what it changes")
+                   "on the CPU, each fit 2 steps, then `zoo scale`, to check a config before GPU "
+                   "time is spent on it; docs/pipeline.md lists what it changes")
     p.set_defaults(handler=run)
 
 

@@ -44,7 +44,7 @@ def run_demo(args: argparse.Namespace) -> int:
         ["eval", "--agent", "scripted", "--out", str(args.out / "eval"), "--overwrite", *common],
     ]
     if args.env == "craftax":
-        print("The first run waits 1-2 min before the bars move: JAX compiles Craftax's step and "
+        print("The first run waits before the bars move: JAX compiles Craftax's step and "
               "renderer (and builds its texture cache once); later runs reuse the compile cache.",
               flush=True)
     for argv in steps:

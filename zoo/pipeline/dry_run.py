@@ -36,7 +36,7 @@ CLIP_INIT = Path("clip_init") / "ViT-B-16-random.bin"
 # val_fraction 0.3 and no test split, episodes 1 and 2 are validation and 0 and 3 training
 # (zoo.data.sequences.episode_split), so each side packs one 640-step sequence; CrafterCaption
 # holds out 2 (the prior's pairs need 2 episodes to split) and validates on 1. Every frame goes
-# through ViT-B/16 once in `zoo goals embed` (~6 frames/s in fp32 on 2 cores): the frame count
+# through ViT-B/16 once in `zoo goals embed`, which is slow in fp32 on a CPU: the frame count
 # is the dry run's largest cost.
 SIZES = {
     "episodes": 4, "max_steps": 500, "episodes_per_shard": 2, "workers": 1,

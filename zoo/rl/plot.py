@@ -15,8 +15,9 @@ LABELS = {"ppo_rnn": "PPO-RNN", "cvpt_rl": "C-VPT-RL", "ppo_steve": "PPO-Steve"}
 
 
 def read_run(run_dir: str | Path) -> tuple[dict, np.ndarray, np.ndarray]:
-    """(config, env steps, success rate of the logged window) of one ``zoo rl`` run (runs
-    logged before 2026-12-03's fix counted the last 100 episodes to end, biased to short ones)."""
+    """(config, env steps, success rate of the logged window) of one ``zoo rl`` run (the
+    window is the last 100 episodes in seed order, ``SeedOrderWindow``, not the last 100 to end,
+    which would favour short episodes)."""
     run_dir = Path(run_dir)
     config_path, metrics_path = run_dir / "config.yaml", run_dir / "metrics.csv"
     if not config_path.is_file() or not metrics_path.is_file():

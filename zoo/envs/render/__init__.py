@@ -1,9 +1,10 @@
 """Craftax-Classic frames on the CPU, and the one setting that picks who renders them.
 
 Craftax's JAX renderer adds 17 full-frame block textures one after another and scans mobs
-sequentially: ~1.5k frames/s on a CPU. ``render_frames`` draws the same frames, bit for bit,
+sequentially, which is slow on a CPU. ``render_frames`` draws the same frames, bit for bit,
 from the zoo's exported state plus ``state_rng`` with a numba kernel (a texture gather, a
-few sprites, one shading pass, a precomputed inventory panel), tens of times faster.
+few sprites, one shading pass, a precomputed inventory panel), much faster
+(docs/results/benchmarks.md).
 
 The renderer is chosen once for everything that makes a Craftax frame (the env's pixels,
 generation, decoding ``--frames rendered`` shards): a function's ``renderer`` argument, else

@@ -1,10 +1,10 @@
 """zlib's CRC32 of rendered frames at memory speed: the check every re-rendered chunk passes.
 
 A ``--frames rendered`` chunk stores the CRC32 of its frames; decoding re-renders them and
-compares. zlib's table-driven CRC32 runs at ~0.8 GB/s here (~80 us a frame, more than the
-render). On x86 with PCLMULQDQ this folds 64 bytes per step with carry-less multiplies
-(Intel's "Fast CRC Computation Using PCLMULQDQ", the constants zlib-ng uses) in ~15-20 us a
-frame; the last 16 bytes and any tail go through the byte table. Elsewhere it is zlib's.
+compares. zlib's table-driven CRC32 takes longer per frame than the render itself. On x86
+with PCLMULQDQ this folds 64 bytes per step with carry-less multiplies (Intel's "Fast CRC
+Computation Using PCLMULQDQ", the constants zlib-ng uses), several times faster; the last 16
+bytes and any tail go through the byte table. Elsewhere it is zlib's.
 Same polynomial, same value as ``zlib.crc32`` (tested on random buffers and offsets).
 """
 

@@ -5,7 +5,7 @@ their tiles (player, then zombies, cows, skeletons and arrows, each kind in slot
 Craftax scans them), the light (``shade``) and the inventory panel below. Only the tiles a
 sprite touches are composited, in float32 work space; then every tile is lit into the uint8
 frame, one 16x16 tile at a time (its work space stays in the L1 cache; lighting the whole map
-in one pass measured slower). By day a plain tile's pixels depend only on its block and the
+in one pass is slower). By day a plain tile's pixels depend only on its block and the
 frame's light and sleep, so each block seen is lit once and copied; at night the static
 differs per pixel, so every tile is lit with its share of ``noise.uniform``'s draws. The
 panel's arithmetic is all integers and comes precomputed per cell (``textures``).

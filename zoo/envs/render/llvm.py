@@ -5,8 +5,8 @@
 and add (numba itself never contracts, so every other product is rounded on its own).
 
 ``wide_vectors()`` marks the function that calls it "prefer-vector-width"="512". On CPUs with
-AVX-512, LLVM's tuning otherwise vectorises with 256-bit registers; the kernel's loops run
-~1.5x faster with 512 (the night static: 21 -> 14 us a frame). Elsewhere LLVM ignores it.
+AVX-512, LLVM's tuning otherwise vectorises with 256-bit registers, and the kernel's loops
+(the night static most) run faster with 512. Elsewhere LLVM ignores it.
 Call it first in every function with a hot loop, and in the callers they may be inlined into.
 """
 

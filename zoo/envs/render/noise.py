@@ -4,8 +4,8 @@ JAX draws uniform floats from threefry-2x32 bits. With ``jax_threefry_partitiona
 default since JAX 0.5) element i of the shape hashes the 64-bit counter (0, i) under the key
 and keeps the xor of both output words; the float is the top 23 bits as a mantissa in [1, 2)
 minus 1. Reproduced here bit for bit (``tests/zoo/envs/test_render.py`` checks it against
-JAX), one frame's 16,128 values in ~15-20 us per core, where a jitted JAX batch takes 150 us or
-more per frame on the CPU (``bench/bench_render.py`` measures both).
+JAX), several times faster per frame than a jitted JAX batch on the CPU
+(``bench/bench_render.py`` times both; docs/results/benchmarks.md).
 """
 
 from __future__ import annotations

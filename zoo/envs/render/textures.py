@@ -94,7 +94,7 @@ def _planar(tiles) -> np.ndarray:
 
 @lru_cache(maxsize=1)
 def load_atlas() -> Atlas:
-    """Read craftax's texture cache once per process (builds it on first use, ~30 s)."""
+    """Read craftax's texture cache once per process (craftax builds it on first use, slowly)."""
     from craftax.craftax_classic.constants import load_all_textures
 
     tex = {k: v if isinstance(v, list) else np.asarray(v) for k, v in

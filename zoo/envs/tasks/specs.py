@@ -77,7 +77,7 @@ WOOD_PICKAXE = _sub(Achievement.MAKE_WOOD_PICKAXE, "craft wood pickaxe")
 COAL = _sub(Achievement.COLLECT_COAL, "obtain coal")
 STONE = _sub(Achievement.COLLECT_STONE, "obtain stone")
 
-SINGLE_STEP_LIMIT = 500  # the paper gives none; ~50x the goal-directed expert's slowest median
+SINGLE_STEP_LIMIT = 500  # the paper gives none; well above the goal-directed expert's medians
 _WOOD_TOOL = {Item.WOOD: 3}
 _STONE_TOOL = {Item.WOOD: 3, Item.STONE: 1, Item.WOOD_PICKAXE: 1}
 

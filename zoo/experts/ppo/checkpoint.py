@@ -3,8 +3,8 @@
 A run directory holds ``checkpoints/update_0000100/`` folders, each with ``params.msgpack``,
 ``opt_state.msgpack``, ``rollout.msgpack`` and ``meta.json``. The rollout state (env states and
 their pool of fresh worlds, the observation, the GRU state, the episode counters, the PRNG key)
-makes a resumed run the run it interrupted, update for update; it is the big file (48 KB per
-env, measured at 8 and 32 envs: ~195 MB at 4,096), so ``keep`` bounds the disk it takes.
+makes a resumed run the run it interrupted, update for update; it is the big file (~48 KB per
+env: ~195 MB at 4,096 envs), so ``keep`` bounds the disk it takes.
 A folder is written under a temporary name and renamed when complete, so a killed run never
 leaves a half-written checkpoint behind.
 """

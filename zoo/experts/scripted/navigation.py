@@ -3,7 +3,8 @@
 One Dijkstra from the player per step answers every "where is the nearest X" question at
 once, so goals can change every step without re-planning costs. Cell costs are small
 integers (1 to walk, more to mine or bridge through), the search is compiled with numba
-(~50 us on a 64x64 map) and ties break in a fixed neighbour order, so plans are deterministic.
+(cheap enough to run every step) and ties break in a fixed neighbour order, so plans are
+deterministic.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ kept) and the small temporal head once per env, all envs in one batch: the
 frame-features-then-windows split of ``zoo goals embed`` (``ClipEmbedder``), which gives the
 same embeddings as ``encode_video`` on explicit clips (tests/zoo/gym checks it here too). The
 tower is called on the new frames alone: ``encode_frames`` takes whole 6-frame clips, and
-padding one env's frame to a clip cost 6 tower passes (24 ms a step instead of ~5 on a CPU).
+padding one env's frame to a clip would cost 6 tower passes instead of one.
 """
 
 from __future__ import annotations
