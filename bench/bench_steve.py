@@ -3,7 +3,7 @@
 Measures, in one run on the same batch of N envs (frames 144 px, C-VPT tiny at 72 px as in
 configs/csteve1_cpu.yaml):
   * one acting step of C-VPT (``CVPTPolicy.act``) against C-Steve-1 with classifier-free
-    guidance (``StevePolicy.act``, both passes in one forward) and C-Steve-1 without guidance
+    guidance (``CSteve1Policy.act``, both passes in one forward) and C-Steve-1 without guidance
     (cfg_scale 0), for head conditioning (the paper's) and TrXL-input conditioning (whose two
     passes both run the Transformer-XL), and head conditioning over a C-VPT with VPT's hidden
     head layer (``head_hidden``; its C-VPT step is timed too); goal: guidance costs <= 1.3x a
@@ -29,10 +29,10 @@ import numpy as np
 import torch
 
 from zoo.agents.cvpt_agent import CVPTPolicy
-from zoo.agents.steve_agent import StevePolicy
+from zoo.agents.csteve1_agent import CSteve1Policy
 from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
-from zoo.models.steve import SteveConfig, SteveModel
+from zoo.models.csteve1 import CSteve1Config, CSteve1Model
 
 RESULTS = Path(__file__).parent / "results" / "steve.json"
 
@@ -75,10 +75,10 @@ def acting(num_envs: int, repeats: int) -> dict:
     for conditioning, head_hidden, label, base in variants:
         for scale in (1.5, 0.0):
             base_of[f"steve_{label}_cfg{scale}"] = base
-            steve = StevePolicy(
-                SteveModel(
+            steve = CSteve1Policy(
+                CSteve1Model(
                     _backbone(head_hidden=head_hidden),
-                    SteveConfig(goal_dim=512, conditioning=conditioning),
+                    CSteve1Config(goal_dim=512, conditioning=conditioning),
                 ),
                 cfg_scale=scale,
             )
@@ -134,7 +134,7 @@ def training(batch: int, seq_len: int, repeats: int) -> dict:
         return step
 
     cvpt = _backbone().train()
-    steve = SteveModel(_backbone(), SteveConfig(goal_dim=512)).train()
+    steve = CSteve1Model(_backbone(), CSteve1Config(goal_dim=512)).train()
     cvpt_s = _median_seconds(step_fn(cvpt, (frames, first), cvpt.parameters()), repeats, 1)
     steve_s = _median_seconds(
         step_fn(steve, (frames, first, goal), steve.trainable_parameters().values()), repeats, 1

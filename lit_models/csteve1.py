@@ -1,7 +1,7 @@
 """C-Steve-1 training (paper §4.3): goal-conditioned behaviour cloning on relabelled CrafterPlay.
 
 Loss -log pi(a_t | o_1:t, z_1:t) over TBPTT windows, the loop C-VPT uses
-(``lit_models.sequence_bc.SequenceBC``); the network is ``zoo.models.steve.SteveModel``: a C-VPT
+(``lit_models.sequence_bc.SequenceBC``); the network is ``zoo.models.csteve1.CSteve1Model``: a C-VPT
 loaded from ``backbone`` (a ``zoo fit`` checkpoint or ``zoo export`` folder), LoRA on its
 Transformer-XL and a zero-initialised conditioning layer, the only parameters that train.
 
@@ -18,12 +18,12 @@ import torch
 from lit_models.sequence_bc import IGNORE_ACTION, SequenceBC, UpdateEvery
 from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
-from zoo.models.steve import Conditioning, SteveConfig, SteveModel
+from zoo.models.csteve1 import Conditioning, CSteve1Config, CSteve1Model
 from zoo.weights import load_model
 
 
 class CSteve1(SequenceBC):
-    """Goal-conditioned C-VPT with LoRA, trained on SteveDataModule batches."""
+    """Goal-conditioned C-VPT with LoRA, trained on CSteve1DataModule batches."""
 
     condition_keys = ("goal",)
 
@@ -60,7 +60,7 @@ class CSteve1(SequenceBC):
         head_hidden: width of a trainable hidden layer before C-VPT's linear policy head (VPT's
             head has one; 0: none, and head conditioning is one logit offset per goal).
         goal_hidden: width of nonlinear goal features relu(V z) the conditioning reads beside z
-            (0: the goal enters linearly; see ``zoo.models.steve``).
+            (0: the goal enters linearly; see ``zoo.models.csteve1``).
         lora_rank: LoRA rank on the Transformer-XL (0: train the conditioning layer only).
         lora_alpha: LoRA scale numerator.
         lora_dropout: dropout on the LoRA branch.
@@ -116,7 +116,7 @@ class CSteve1(SequenceBC):
             self.hparams["backbone_config"] = cvpt.config.to_dict()
         else:
             cvpt = CVPTModel(CVPTConfig.from_dict(self.hparams.backbone_config))
-        self.model = SteveModel(cvpt, SteveConfig.from_hparams(dict(self.hparams)))
+        self.model = CSteve1Model(cvpt, CSteve1Config.from_hparams(dict(self.hparams)))
 
     def validation_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> None:
         """The usual val/loss, plus how much the goal helps: on the steps that have a goal,

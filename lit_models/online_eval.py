@@ -23,14 +23,14 @@ from lightning.pytorch.callbacks import Callback
 from lightning.pytorch.loggers import WandbLogger
 
 from zoo.agents.cvpt_agent import CVPTAgent, CVPTPolicy
-from zoo.agents.steve_agent import GoalEncoder, SteveAgent, StevePolicy
+from zoo.agents.csteve1_agent import GoalEncoder, CSteve1Agent, CSteve1Policy
 from zoo.envs import make_env
 from zoo.envs.tasks import make_task_env
 from zoo.eval.plots import plot_success_rates, write_gif
 from zoo.eval.report import summarize
 from zoo.eval.rollout import evaluate
 from zoo.eval.task_eval import evaluate_task, summarize_task
-from zoo.models.steve import SteveModel
+from zoo.models.csteve1 import CSteve1Model
 
 
 class OnlineEvaluation(Callback):
@@ -98,16 +98,16 @@ class OnlineEvaluation(Callback):
                     self._log_media(logger, rates, frames, step)
 
     def evaluate(self, model) -> tuple[dict[str, float], dict[str, float], np.ndarray | None]:
-        """Play a copy of ``model`` (a CVPTModel or SteveModel); returns the scalar metrics,
+        """Play a copy of ``model`` (a CVPTModel or CSteve1Model); returns the scalar metrics,
         the achievement success rates and the first episode's frames (or None)."""
         model = copy.deepcopy(model).float().eval()
         gif = 0 if self.video else None
-        if isinstance(model, SteveModel):
+        if isinstance(model, CSteve1Model):
             if self.task is None:
                 raise ValueError("OnlineEvaluation of C-Steve-1 needs task, instruction, cclip, prior")
             if self._goals is None:
                 self._goals = GoalEncoder.load(self.cclip, self.prior)
-            agent = SteveAgent(StevePolicy(model, cfg_scale=self.cfg_scale), self.num_envs,
+            agent = CSteve1Agent(CSteve1Policy(model, cfg_scale=self.cfg_scale), self.num_envs,
                                self._goals)
             if self._env is None:
                 self._env = make_task_env(self.task, self.env_name, self.num_envs,

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from zoo.agents.steve_agent import StevePolicy
+from zoo.agents.csteve1_agent import CSteve1Policy
 from zoo.weights import inference_settings, load_model
 from zoo.weights.export import CHECKSUM_FILE, exported_kind, verify_export
 
@@ -41,5 +41,5 @@ def test_shipped_c_steve_1_plays_at_the_scale_its_card_measured() -> None:
     loading without arguments plays as measured (the paper's 1.5 is for exports without it)."""
     folder = WEIGHTS / "csteve1_cpu"
     assert inference_settings(folder, "csteve1") == {"cfg_scale": 1.0, "temperature": 1.0}
-    policy = StevePolicy.load(folder)
+    policy = CSteve1Policy.load(folder)
     assert (policy.cfg_scale, policy.temperature, policy.greedy) == (1.0, 1.0, False)

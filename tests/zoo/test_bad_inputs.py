@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from zoo.agents.steve_agent import GoalEncoder, instruction_note
+from zoo.agents.csteve1_agent import GoalEncoder, instruction_note
 from zoo.cli import main
 from zoo.files import sha256_file
 from zoo.weights import load_model
@@ -60,12 +60,15 @@ def test_an_unreadable_checkpoint_names_the_file_and_the_problem(tmp_path, what)
     assert err.value.__cause__ is None and err.value.__suppress_context__  # torch's text is gone
 
 
-def test_export_of_a_folder_says_it_wants_a_file(tmp_path, capsys) -> None:
-    folder = WEIGHTS / "cvpt_tiny_cpu"
+def test_export_of_a_folder_that_is_no_export_names_what_it_lacks(tmp_path, capsys) -> None:
+    """An export folder is written again (tests/zoo/agents/test_agent_spec.py); any other
+    folder is one line naming what an export holds."""
+    folder = tmp_path / "empty"
+    folder.mkdir()
     assert main(["export", "--checkpoint", str(folder), "--out", str(tmp_path / "x")]) == 2
     assert _one_error_line(capsys, "export") == (
-        f"zoo export: error: {folder} is a folder, not a file; "
-        "expected a `zoo fit` checkpoint (.ckpt)"
+        f"zoo export: error: {folder / 'config.json'} missing: {folder} is not a `zoo export` "
+        "folder"
     )
 
 

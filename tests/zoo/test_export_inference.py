@@ -1,5 +1,5 @@
 """A C-Steve-1 export records the guidance scale and temperature its scores were measured at, and
-`StevePolicy.load`, `zoo play` and `zoo eval` play at them unless told otherwise (issue 34)."""
+`CSteve1Policy.load`, `zoo play` and `zoo eval` play at them unless told otherwise (issue 34)."""
 
 from __future__ import annotations
 
@@ -10,13 +10,13 @@ import pytest
 import torch
 
 from zoo.agents import AgentSpec
-from zoo.agents.steve_agent import StevePolicy
+from zoo.agents.csteve1_agent import CSteve1Policy
 from zoo.cli import main
 from zoo.envs.constants import NUM_ACTIONS
 from zoo.files import sha256_file
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.models.prior import CVAEPrior, PriorConfig
-from zoo.models.steve import SteveConfig, SteveModel
+from zoo.models.csteve1 import CSteve1Config, CSteve1Model
 from zoo.weights import inference_settings, load_model
 from zoo.weights.export import (
     CHECKSUM_FILE,
@@ -44,11 +44,11 @@ def steve_ckpt(tmp_path_factory: pytest.TempPathFactory) -> Path:
         "tiny", NUM_ACTIONS, d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(2, 4, 4),
         encoder_hidden=32, memory_len=4, input_downsample=4,
     ))
-    config = SteveConfig(goal_dim=16, lora_rank=2)
+    config = CSteve1Config(goal_dim=16, lora_rank=2)
     hparams = {"_class_path": "lit_models.csteve1.CSteve1", "backbone": "cvpt.ckpt",
                "backbone_config": backbone.config.to_dict(), **config.to_dict()}
     path = tmp_path_factory.mktemp("steve") / "best.ckpt"
-    return _lightning_checkpoint(SteveModel(backbone, config), hparams, path)
+    return _lightning_checkpoint(CSteve1Model(backbone, config), hparams, path)
 
 
 def _export(steve_ckpt: Path, out: Path, *flags: str) -> Path:
@@ -74,10 +74,10 @@ def test_export_records_the_scale_and_loading_plays_at_it(
     recorded = {"cfg_scale": 0.7, "temperature": 1.0}
     assert json.loads((out / CONFIG_FILE).read_text())[INFERENCE] == recorded
     assert inference_settings(out, "csteve1") == recorded
-    assert isinstance(load_model(out, "csteve1"), SteveModel)  # the block is not a model field
-    policy = StevePolicy.load(out)
+    assert isinstance(load_model(out, "csteve1"), CSteve1Model)  # the block is not a model field
+    policy = CSteve1Policy.load(out)
     assert (policy.cfg_scale, policy.temperature, policy.greedy) == (0.7, 1.0, False)
-    told = StevePolicy.load(out, cfg_scale=2.0, temperature=0.5)
+    told = CSteve1Policy.load(out, cfg_scale=2.0, temperature=0.5)
     assert (told.cfg_scale, told.temperature) == (2.0, 0.5)
     assert AgentSpec("csteve1", out).build(1).inference == recorded
     assert AgentSpec("csteve1", out, temperature=0, cfg_scale=0).build(1).inference == {
@@ -89,7 +89,7 @@ def test_a_recorded_temperature_of_zero_plays_the_most_likely_action(
     steve_ckpt: Path, tmp_path: Path
 ) -> None:
     out = _export(steve_ckpt, tmp_path / "export", "--temperature", "0")
-    policy = StevePolicy.load(out)
+    policy = CSteve1Policy.load(out)
     assert (policy.cfg_scale, policy.greedy) == (1.5, True)
     assert AgentSpec("csteve1", out).build(1).inference == {"cfg_scale": 1.5, "temperature": 0.0}
 
@@ -102,7 +102,7 @@ def test_checkpoints_and_older_exports_play_at_the_defaults(
     _rewrite_config(out, lambda config: {k: v for k, v in config.items() if k != INFERENCE})
     for source in (steve_ckpt, out):
         assert inference_settings(source, "csteve1") == DEFAULTS
-        policy = StevePolicy.load(source)
+        policy = CSteve1Policy.load(source)
         assert (policy.cfg_scale, policy.temperature) == (1.5, 1.0)
     _rewrite_config(out, lambda config: {**config, INFERENCE: {"cfg_scale": 0.25}})
     assert inference_settings(out, "csteve1") == {"cfg_scale": 0.25, "temperature": 1.0}
@@ -123,7 +123,7 @@ def test_a_bad_recorded_block_names_the_file(
     out = _export(steve_ckpt, tmp_path / "export")
     _rewrite_config(out, lambda config: {**config, INFERENCE: block})
     with pytest.raises(ValueError, match=rf"config.json: .*{message}"):
-        StevePolicy.load(out)
+        CSteve1Policy.load(out)
 
 
 def test_export_refuses_settings_a_model_does_not_play_with(

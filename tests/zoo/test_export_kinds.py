@@ -23,7 +23,7 @@ from zoo.files import sha256_file
 from zoo.models.cclip import build_cclip
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.models.prior import CVAEPrior, PriorConfig
-from zoo.models.steve import SteveConfig, SteveModel
+from zoo.models.csteve1 import CSteve1Config, CSteve1Model
 from zoo.weights import load_model
 from zoo.weights.cli import DTYPE_CHOICES
 from zoo.weights.export import (
@@ -84,7 +84,7 @@ def _prior() -> tuple[nn.Module, dict]:
 
 def _steve() -> tuple[nn.Module, dict]:
     backbone = CVPTModel(CVPTConfig.from_name("tiny", NUM_ACTIONS, **CVPT_SIZES))
-    config = SteveConfig(goal_dim=16, lora_rank=2, lora_targets=["query", "ff.0"], head_hidden=8)
+    config = CSteve1Config(goal_dim=16, lora_rank=2, lora_targets=["query", "ff.0"], head_hidden=8)
     hparams = {
         "_class_path": "lit_models.csteve1.CSteve1",
         "backbone": "cvpt.ckpt",
@@ -92,7 +92,7 @@ def _steve() -> tuple[nn.Module, dict]:
         **config.to_dict(),
         "lr": 1e-3,
     }
-    return SteveModel(backbone, config), hparams
+    return CSteve1Model(backbone, config), hparams
 
 
 def _frames(shape: tuple[int, ...], seed: int = 0) -> torch.Tensor:

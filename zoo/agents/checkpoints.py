@@ -25,10 +25,10 @@ def checkpoint_kind(path: str | Path) -> str:
     if is_rl_run(path):
         return "rl"
     if path.is_file() and path.suffix == ".ckpt":
-        from zoo.agents.steve_agent import is_steve_checkpoint
+        from zoo.agents.csteve1_agent import is_csteve1_checkpoint
         from zoo.weights.checkpoint_io import read_torch_file
 
-        return "csteve1" if is_steve_checkpoint(read_torch_file(path)) else "cvpt"
+        return "csteve1" if is_csteve1_checkpoint(read_torch_file(path)) else "cvpt"
     if path.is_dir():
         if (path / "model.safetensors").is_file() or (path / "sha256.txt").is_file():
             from zoo.weights.export import KINDS, exported_kind

@@ -53,12 +53,12 @@ def _cvpt(spec: AgentSpec, num_envs: int) -> Agent:
 
 
 def _csteve1(spec: AgentSpec, num_envs: int) -> Agent:
-    from zoo.agents.steve_agent import SteveAgent, StevePolicy
+    from zoo.agents.csteve1_agent import CSteve1Agent, CSteve1Policy
 
     temperature = None if spec.temperature is None else spec.sampling_temperature
-    policy = StevePolicy.load(spec.checkpoint, cfg_scale=spec.cfg_scale, temperature=temperature,
+    policy = CSteve1Policy.load(spec.checkpoint, cfg_scale=spec.cfg_scale, temperature=temperature,
                               greedy=spec.greedy, cclip=spec.cclip, prior=spec.prior)
-    return SteveAgent(policy, num_envs)
+    return CSteve1Agent(policy, num_envs)
 
 
 def _rl(spec: AgentSpec, num_envs: int) -> Agent:

@@ -1,6 +1,6 @@
 """``zoo eval``: play an agent for N episodes and write the Crafter evaluation report, or, with
 ``--task``, its success on a task suite (``zoo.envs.tasks``); its subcommands run C-Steve-1's
-results protocol (``zoo.eval.steve_tables``)."""
+results protocol (``zoo.eval.csteve1_tables``)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from zoo.argtypes import existing_dir, non_negative_int, out_dir, positive_int
 from zoo.envs import ENV_NAMES
 from zoo.envs.tasks import SINGLE_STEP_TASKS, TASKS
 from zoo.eval.play import inference_meta
-from zoo.eval.steve_tables import STEVE_ROWS, TABLE_ROWS
+from zoo.eval.csteve1_tables import STEVE_ROWS, TABLE_ROWS
 from zoo.weights.guidance import PAPER_CFG_SCALE
 
 DESCRIPTION = """\
@@ -296,7 +296,7 @@ def run_task_eval(
         except ValueError as err:
             raise UsageError(f"--instruction: {err}") from None
         if getattr(agent, "name", None) == "csteve1":  # reads free text: say what it resembles
-            from zoo.agents.steve_agent import instruction_note
+            from zoo.agents.csteve1_agent import instruction_note
 
             note = instruction_note(agent.goals, args.instruction)
             if note:
@@ -340,8 +340,8 @@ def run_task_eval(
 
 def run_protocol(args: argparse.Namespace) -> int:
     """``zoo eval task-table|cfg-sweep|goal-check``: C-Steve-1's results protocol, written by
-    ``zoo.eval.steve_tables`` under --out with a summary_<mode>.md/.json."""
-    from zoo.eval import steve_tables
+    ``zoo.eval.csteve1_tables`` under --out with a summary_<mode>.md/.json."""
+    from zoo.eval import csteve1_tables
 
     mode = PROTOCOLS[args.protocol][0]
     try:
@@ -349,21 +349,21 @@ def run_protocol(args: argparse.Namespace) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         if mode == "goals":
             try:
-                rows = steve_tables.goals(args.cclip, args.prior, args.embeddings,
+                rows = csteve1_tables.goals(args.cclip, args.prior, args.embeddings,
                                           args.max_shards, args.min_count, args.samples)
             except FileNotFoundError as err:  # a folder without shards
                 raise UsageError(f"--embeddings: {err}") from None
         else:
-            setting = steve_tables.Setting(
+            setting = csteve1_tables.Setting(
                 args.out, tuple(args.env), args.episodes, args.seed, args.num_envs,
                 args.temperature, _protocol_steve(args),
             )
-            rows = (steve_tables.table(setting, args.tasks, args.rows, args.cvpt, args.cfg_scale)
-                    if mode == "table" else steve_tables.sweep(setting, args.cfg_scales))
+            rows = (csteve1_tables.table(setting, args.tasks, args.rows, args.cvpt, args.cfg_scale)
+                    if mode == "table" else csteve1_tables.sweep(setting, args.cfg_scales))
     except UsageError as err:
         print(f"zoo eval {args.protocol}: error: {err}", file=sys.stderr)
         return 2
-    written = steve_tables.write_summary(args.out, mode, rows)
+    written = csteve1_tables.write_summary(args.out, mode, rows)
     print(f"wrote {', '.join(str(path) for path in written)}")
     return 0
 

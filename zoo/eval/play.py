@@ -134,7 +134,7 @@ def run_play(args: argparse.Namespace) -> int:
     except (ValueError, FileNotFoundError) as err:
         raise SystemExit(f"zoo play: error: {err}") from None
     if args.instruction:
-        from zoo.agents.steve_agent import instruction_note
+        from zoo.agents.csteve1_agent import instruction_note
 
         for instruction in instructions:
             note = instruction_note(agent.goals, instruction)

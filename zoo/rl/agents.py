@@ -45,10 +45,10 @@ def build_agent(config: RLConfig, next_episode: int = 0, sampling_seed: int = 0)
 def load_executor(config: RLConfig):
     """PPO-Steve's frozen C-Steve-1 (with the config's CFG scale) and the goal of each of the
     61 captions: the prior's mean goal of its text, as ``zoo play`` gives text to C-Steve-1."""
-    from zoo.agents.steve_agent import GoalEncoder, StevePolicy
+    from zoo.agents.csteve1_agent import GoalEncoder, CSteve1Policy
     from zoo.captions.vocabulary import load_vocabulary
 
-    steve = StevePolicy.load(config.checkpoint, config.device, cfg_scale=config.cfg_scale,
+    steve = CSteve1Policy.load(config.checkpoint, config.device, cfg_scale=config.cfg_scale,
                              cclip=config.cclip, prior=config.prior)
     models = steve.goal_model_paths()  # the config's, else the ones its export records
     encoder = GoalEncoder.load(models["cclip"], models["prior"], sample_prior=False)

@@ -5,7 +5,7 @@ prior, C-Steve-1) without Lightning from a ``zoo fit`` ``.ckpt`` or a ``zoo expo
 (``zoo/weights/export.py``: the kinds registry, export, checksums); ``inference_settings``
 says what a model plays with beyond its weights (C-Steve-1's guidance scale and temperature, as
 its export records them); ``checkpoint_io`` reads torch files weights-only with errors that name
-the file. ``CVPTPolicy.load`` wraps ``load_model`` for acting, ``StevePolicy.load`` both.
+the file. ``CVPTPolicy.load`` wraps ``load_model`` for acting, ``CSteve1Policy.load`` both.
 Imported lazily: ``zoo --help`` must not load torch.
 """
 

@@ -2,7 +2,7 @@
 
 The kind (C-VPT, C-CLIP, CVAE prior, C-Steve-1) comes from the checkpoint's hyper-parameters.
 For C-Steve-1, `--cfg-scale`/`--temperature` record the settings its scores were measured at, so
-`zoo play`, `zoo eval` and `StevePolicy.load` play at them unless told otherwise, and
+`zoo play`, `zoo eval` and `CSteve1Policy.load` play at them unless told otherwise, and
 `--cclip`/`--prior` the goal models that read its text instructions, so it needs no other flag.
 An export folder given as the checkpoint is written again (keeping what it records unless told).
 The older positional form `zoo export CKPT DIR` still works (docs and scripts use it).

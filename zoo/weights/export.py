@@ -88,21 +88,21 @@ def _prior_build(config: dict[str, Any]) -> nn.Module:
 
 
 def _steve_config(hparams: dict[str, Any]) -> dict[str, Any]:
-    """C-Steve-1's hyper-parameter layout: the backbone's CVPTConfig dict + SteveConfig fields."""
-    from zoo.models.steve import SteveConfig
+    """C-Steve-1's hyper-parameter layout: the backbone's CVPTConfig dict + CSteve1Config fields."""
+    from zoo.models.csteve1 import CSteve1Config
 
     backbone = CVPTConfig.from_dict(hparams["backbone_config"]).to_dict()
-    return {"backbone_config": backbone, **SteveConfig.from_hparams(hparams).to_dict()}
+    return {"backbone_config": backbone, **CSteve1Config.from_hparams(hparams).to_dict()}
 
 
 def _steve_build(config: dict[str, Any]) -> nn.Module:
-    from zoo.models.steve import SteveConfig, SteveModel
+    from zoo.models.csteve1 import CSteve1Config, CSteve1Model
 
-    unknown = set(config) - {"backbone_config"} - {f.name for f in dataclasses.fields(SteveConfig)}
+    unknown = set(config) - {"backbone_config"} - {f.name for f in dataclasses.fields(CSteve1Config)}
     if unknown:
         raise ValueError(f"unknown C-Steve-1 config fields {sorted(unknown)}")
     backbone = CVPTModel(CVPTConfig.from_dict(config["backbone_config"]))
-    return SteveModel(backbone, SteveConfig.from_hparams(config))
+    return CSteve1Model(backbone, CSteve1Config.from_hparams(config))
 
 
 def _steve_config_of(model: nn.Module) -> dict[str, Any]:
@@ -147,7 +147,7 @@ KINDS: dict[str, ModelKind] = {
         "latent_dim", _prior_config, _prior_build, lambda model: dataclasses.asdict(model.config),
     ),
     "csteve1": ModelKind(
-        "C-Steve-1", "lit_models.csteve1.CSteve1", "zoo.models.steve.SteveModel",
+        "C-Steve-1", "lit_models.csteve1.CSteve1", "zoo.models.csteve1.CSteve1Model",
         "backbone_config", _steve_config, _steve_build, _steve_config_of,
         {"cfg_scale": PAPER_CFG_SCALE, "temperature": 1.0}, ("cclip", "prior"),
     ),

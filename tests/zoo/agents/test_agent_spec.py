@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from zoo.agents import AgentSpec
-from zoo.agents.steve_agent import StevePolicy
+from zoo.agents.csteve1_agent import CSteve1Policy
 from zoo.cli import main
 from zoo.weights.export import (
     CONFIG_FILE,
@@ -72,7 +72,7 @@ def test_the_shipped_c_steve_1_names_its_goal_models() -> None:
         "prior": {"path": "../prior_cpu", "sha256": checkpoint_sha256(PRIOR)},
     }
     assert recorded_goal_models(STEVE) == {"cclip": CCLIP.resolve(), "prior": PRIOR.resolve()}
-    assert StevePolicy.load(STEVE).goals.goal_dim == 64  # built from them, when first asked
+    assert CSteve1Policy.load(STEVE).goals.goal_dim == 64  # built from them, when first asked
 
 
 def _goals_and_actions(spec: AgentSpec) -> tuple[np.ndarray, np.ndarray]:
@@ -154,10 +154,10 @@ def test_the_goal_models_must_fit_the_policy(tmp_path: Path) -> None:
 
 def test_the_guidance_default_is_the_papers_and_an_export_keeps_its_own(tmp_path: Path) -> None:
     assert PAPER_CFG_SCALE == 1.5  # paper §4.3
-    assert StevePolicy.load(STEVE).cfg_scale == 1.0  # what the card measured, recorded
+    assert CSteve1Policy.load(STEVE).cfg_scale == 1.0  # what the card measured, recorded
     bare = tmp_path / "paper"
     export_checkpoint(STEVE, bare, inference={"cfg_scale": PAPER_CFG_SCALE})
-    assert StevePolicy.load(bare).cfg_scale == PAPER_CFG_SCALE
+    assert CSteve1Policy.load(bare).cfg_scale == PAPER_CFG_SCALE
     spec = dataclasses.replace(AgentSpec(checkpoint=STEVE), cfg_scale=2.0)
     assert spec.build(1).inference == {"cfg_scale": 2.0, "temperature": 1.0}
 

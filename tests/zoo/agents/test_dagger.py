@@ -20,7 +20,7 @@ from zoo.experts.scripted import ScriptedExpert
 from zoo.models.cclip import CCLIPConfig, CCLIPModel
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.models.prior import CVAEPrior, PriorConfig
-from zoo.models.steve import SteveConfig, SteveModel
+from zoo.models.csteve1 import CSteve1Config, CSteve1Model
 from zoo.weights.export import checkpoint_sha256, save_exported
 
 SIZES = dict(d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(4, 8, 8),
@@ -202,7 +202,7 @@ def steve_learner(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("steve_learner")
     torch.manual_seed(0)
     backbone = CVPTModel(CVPTConfig.from_name("tiny", NUM_ACTIONS, **SIZES))
-    steve = SteveModel(backbone, SteveConfig(goal_dim=64, lora_rank=2, conditioning="film"))
+    steve = CSteve1Model(backbone, CSteve1Config(goal_dim=64, lora_rank=2, conditioning="film"))
     with torch.no_grad():
         for param in steve.trainable_parameters().values():
             param.normal_(0, 0.5)  # a goal that moves the actions

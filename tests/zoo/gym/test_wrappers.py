@@ -1,6 +1,6 @@
 """The foundation-model wrappers against the models called directly: C-CLIP's reward is the change
 in ``encode_video`` similarity, C-VPT's features are one pass over the episode so far, the goal
-is the one ``SteveAgent`` draws; each restarts at an episode start, alone and batched (the
+is the one ``CSteve1Agent`` draws; each restarts at an episode start, alone and batched (the
 vector env's next-step autoreset). Models: the shipped weights/ exports (a few MB, CPU-fast)."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 import torch
 from gymnasium.vector import AutoresetMode
 
-from zoo.agents.steve_agent import GoalEncoder, SteveAgent, StevePolicy
+from zoo.agents.csteve1_agent import GoalEncoder, CSteve1Agent, CSteve1Policy
 from zoo.gym.env import CrafterDojoEnv
 from zoo.gym.vector import CraftaxVectorEnv
 from zoo.gym.wrappers import (
@@ -172,7 +172,7 @@ def test_vector_cvpt_features_masked_reset_keeps_the_other_episode(vector, cvpt)
 
 def steve_goal(cclip, prior, seed: int) -> np.ndarray:
     """The goal ``zoo eval`` gives C-Steve-1 told TEXT in the episode seeded ``seed``."""
-    agent = SteveAgent(StevePolicy.load(SHIPPED / "csteve1_cpu"), 1, GoalEncoder(cclip, prior))
+    agent = CSteve1Agent(CSteve1Policy.load(SHIPPED / "csteve1_cpu"), 1, GoalEncoder(cclip, prior))
     agent.reset(np.array([seed]))
     agent.instruct([TEXT])
     return agent._goal[0].numpy()

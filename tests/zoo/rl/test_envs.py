@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from zoo.agents.steve_agent import StevePolicy
+from zoo.agents.csteve1_agent import CSteve1Policy
 from zoo.envs.base import Step, episode_seed
 from zoo.envs.constants import NUM_ACTIONS, Achievement, Block, Item
 from zoo.envs.schema import empty_state
 from zoo.envs.tasks import TASKS, TaskProgress
 from zoo.models.cvpt import CVPTConfig, CVPTModel
-from zoo.models.steve import SteveConfig, SteveModel
+from zoo.models.csteve1 import CSteve1Config, CSteve1Model
 from zoo.rl.envs import PlannerEnv, TaskVecEnv, Transition
 
 
@@ -109,13 +109,13 @@ class ScriptedTasks:
         return self._transition(reward, done)
 
 
-def _steve(goal_dim: int = 8) -> StevePolicy:
+def _steve(goal_dim: int = 8) -> CSteve1Policy:
     torch.manual_seed(0)
     backbone = CVPTModel(CVPTConfig.from_name(
         "tiny", NUM_ACTIONS, d_model=16, d_ff=32, n_heads=2, n_layers=1, impala_channels=(2, 4, 4),
         encoder_hidden=16, memory_len=4, input_downsample=4,
     ))
-    return StevePolicy(SteveModel(backbone, SteveConfig(goal_dim=goal_dim, lora_rank=0)))
+    return CSteve1Policy(CSteve1Model(backbone, CSteve1Config(goal_dim=goal_dim, lora_rank=0)))
 
 
 def test_a_planner_action_is_a_caption_whose_goal_steers_c_steve_1_for_an_option():

@@ -2,7 +2,7 @@
 
 The goal is what ``zoo eval`` gives C-Steve-1 for that text (paper §4.3, "Inference"): C-CLIP's
 text embedding through the CVAE prior, unit-normed. It is drawn once per episode from a
-generator seeded with the episode seed and the text, as ``SteveAgent`` draws it, so a Gymnasium
+generator seeded with the episode seed and the text, as ``CSteve1Agent`` draws it, so a Gymnasium
 agent sees the very goal C-Steve-1 gets in the same episode of ``zoo eval``. The observation
 becomes a ``Dict`` with "goal" beside the env's own entries (a Box observation is kept as
 "pixels" if it is a frame, else as "obs").
@@ -19,7 +19,7 @@ from gymnasium import spaces
 from gymnasium.utils import RecordConstructorArgs
 from gymnasium.vector import VectorEnv
 
-from zoo.agents.steve_agent import GoalEncoder
+from zoo.agents.csteve1_agent import GoalEncoder
 from zoo.gym.wrappers.base import ModelWrapper, VectorModelWrapper, load
 from zoo.models.cclip import CCLIPModel
 from zoo.models.prior import CVAEPrior

@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 import torch
 
-from zoo.agents.steve_agent import GoalEncoder, SteveAgent, StevePolicy
+from zoo.agents.csteve1_agent import GoalEncoder, CSteve1Agent, CSteve1Policy
 from zoo.envs.base import Step
 from zoo.envs.constants import NUM_ACTIONS
 from zoo.envs.schema import empty_state
 from zoo.models.cclip import CCLIPConfig, CCLIPModel
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.models.prior import CVAEPrior, PriorConfig
-from zoo.models.steve import SteveConfig, SteveModel
+from zoo.models.csteve1 import CSteve1Config, CSteve1Model
 from zoo.models.trxl import TrXLState
 
 
@@ -25,17 +25,17 @@ def goals() -> GoalEncoder:
     return GoalEncoder(cclip, prior)
 
 
-def _policy(cfg_scale: float = 1.5) -> StevePolicy:
+def _policy(cfg_scale: float = 1.5) -> CSteve1Policy:
     torch.manual_seed(1)
     backbone = CVPTModel(CVPTConfig.from_name(
         "tiny", NUM_ACTIONS, d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(2, 4, 4),
         encoder_hidden=32, memory_len=4, input_downsample=4,
     ))
-    model = SteveModel(backbone, SteveConfig(goal_dim=64, lora_rank=2))
+    model = CSteve1Model(backbone, CSteve1Config(goal_dim=64, lora_rank=2))
     with torch.no_grad():
         for param in model.trainable_parameters().values():
             param.normal_(0, 0.5)
-    return StevePolicy(model, cfg_scale=cfg_scale)
+    return CSteve1Policy(model, cfg_scale=cfg_scale)
 
 
 def _step(n: int, seed: int = 0) -> Step:
@@ -53,10 +53,10 @@ def test_text_caption_and_clip_goals_have_the_goal_width(goals: GoalEncoder) -> 
 
 
 def test_a_goal_depends_on_the_episode_seed_and_the_text_alone(goals: GoalEncoder) -> None:
-    a = SteveAgent(_policy(), 2, goals)
+    a = CSteve1Agent(_policy(), 2, goals)
     a.reset(np.array([5, 6]))
     a.instruct(["obtain wood", "obtain wood"])
-    b = SteveAgent(_policy(), 2, goals)
+    b = CSteve1Agent(_policy(), 2, goals)
     b.instruct(["obtain sapling", None])  # another history before the same episodes
     b.reset(np.array([5, 6]))
     b.instruct(["obtain wood", "obtain wood"])
@@ -65,7 +65,7 @@ def test_a_goal_depends_on_the_episode_seed_and_the_text_alone(goals: GoalEncode
     np.testing.assert_array_equal(a.act(_step(2)), b.act(_step(2)))
 
 
-def _recorded_logits(agent: SteveAgent) -> list[torch.Tensor]:
+def _recorded_logits(agent: CSteve1Agent) -> list[torch.Tensor]:
     """The guided logits of each of ``agent``'s later steps, as its policy computes them."""
     seen, logits = [], agent.policy.logits
 
@@ -81,7 +81,7 @@ def _recorded_logits(agent: SteveAgent) -> list[torch.Tensor]:
 def test_no_instruction_is_the_zero_goal_and_actions_are_sampled_from_the_guided_logits(
     goals: GoalEncoder,
 ) -> None:
-    agent = SteveAgent(_policy(), 3, goals)
+    agent = CSteve1Agent(_policy(), 3, goals)
     agent.reset(np.array([1, 2, 3]))
     agent.instruct(["obtain wood", None, "place table on grass"])
     assert torch.count_nonzero(agent._goal[1]) == 0
@@ -106,13 +106,13 @@ def test_an_env_reset_mid_batch_acts_as_a_fresh_agent_on_the_same_frames(
 ) -> None:
     """A new episode starts with empty Transformer-XL memory, whatever its env saw before."""
     text = ["obtain wood", "obtain wood"]
-    played = SteveAgent(_policy(), 2, goals)
+    played = CSteve1Agent(_policy(), 2, goals)
     played.reset(np.array([5, 6]))
     played.instruct(text)
     for seed in range(3):
         played.act(_step(2, seed))
     played.reset(np.array([0, 9]), mask=np.array([False, True]))
-    fresh = SteveAgent(_policy(), 2, goals)
+    fresh = CSteve1Agent(_policy(), 2, goals)
     fresh.reset(np.array([5, 9]))
     fresh.instruct(text)
     seen_played, seen_fresh = _recorded_logits(played), _recorded_logits(fresh)
@@ -175,4 +175,4 @@ def test_mismatched_goal_width_is_named(goals: GoalEncoder) -> None:
         policy.logits(_step(2).frames, torch.zeros(2, 32), policy.initial_state(2))
     small = GoalEncoder(CCLIPModel(CCLIPConfig.from_name("smoke", embed_dim=32)))
     with pytest.raises(ValueError, match="goal_dim=64"):
-        SteveAgent(policy, 1, small)
+        CSteve1Agent(policy, 1, small)

@@ -148,7 +148,7 @@ def goals(
     ``samples`` sampled goals whose nearest centroid is its caption."""
     import torch
 
-    from zoo.agents.steve_agent import GoalEncoder
+    from zoo.agents.csteve1_agent import GoalEncoder
     from zoo.captions.vocabulary import load_vocabulary
     from zoo.eval.goal_check import caption_centroids, nearest_captions, rank_of_caption
     from zoo.goals.embed import read_embedding_shard

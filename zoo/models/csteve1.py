@@ -55,7 +55,7 @@ AFTER_TRXL: tuple[str, ...] = ("head", "film")
 
 
 @dataclass
-class SteveConfig:
+class CSteve1Config:
     """What C-Steve-1 adds to its C-VPT backbone."""
 
     goal_dim: int = 512
@@ -100,7 +100,7 @@ class SteveConfig:
         return asdict(self)
 
     @classmethod
-    def from_hparams(cls, hparams: dict) -> SteveConfig:
+    def from_hparams(cls, hparams: dict) -> CSteve1Config:
         """The config of a C-Steve-1 training run from its hyper-parameters (None: default)."""
         names = (
             "goal_dim",
@@ -118,10 +118,10 @@ class SteveConfig:
         return cls(**values)
 
 
-class SteveModel(nn.Module):
+class CSteve1Model(nn.Module):
     """A C-VPT network with goal conditioning and LoRA; plain torch (played without Lightning)."""
 
-    def __init__(self, backbone: CVPTModel, config: SteveConfig) -> None:
+    def __init__(self, backbone: CVPTModel, config: CSteve1Config) -> None:
         super().__init__()
         self.config = config
         self.backbone = backbone
@@ -259,4 +259,4 @@ def combine_guidance(cond: torch.Tensor, uncond: torch.Tensor, scale: float) -> 
     return (1.0 + scale) * cond - scale * uncond
 
 
-__all__ = ["AFTER_TRXL", "CONDITIONINGS", "Conditioning", "SteveConfig", "SteveModel", "combine_guidance"]
+__all__ = ["AFTER_TRXL", "CONDITIONINGS", "Conditioning", "CSteve1Config", "CSteve1Model", "combine_guidance"]

@@ -7,7 +7,7 @@ import torch
 
 from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
-from zoo.models.steve import SteveConfig, SteveModel, combine_guidance
+from zoo.models.csteve1 import CSteve1Config, CSteve1Model, combine_guidance
 
 GOAL_DIM = 8
 
@@ -30,7 +30,7 @@ def _inputs(batch: int = 2, steps: int = 5, seed: int = 1):
     return frames, first, goal
 
 
-def _randomise_trainable(model: SteveModel) -> None:
+def _randomise_trainable(model: CSteve1Model) -> None:
     with torch.no_grad():
         for param in model.trainable_parameters().values():
             param.normal_(0, 0.2)
@@ -44,14 +44,14 @@ def test_untrained_steve_is_its_cvpt_whatever_the_goal(conditioning: str, head_h
     frames, first, goal = _inputs()
     cvpt = _backbone()
     expected, _ = cvpt(frames, first, cvpt.initial_state(2))
-    config = SteveConfig(goal_dim=GOAL_DIM, conditioning=conditioning, head_hidden=head_hidden)
-    steve = SteveModel(_backbone(), config)
+    config = CSteve1Config(goal_dim=GOAL_DIM, conditioning=conditioning, head_hidden=head_hidden)
+    steve = CSteve1Model(_backbone(), config)
     logits, _ = steve(frames, first, goal, steve.initial_state(2))
     torch.testing.assert_close(logits, expected, rtol=1e-5, atol=1e-5)  # float rounding only
 
 
 def test_only_lora_and_conditioning_train() -> None:
-    steve = SteveModel(_backbone(), SteveConfig(goal_dim=GOAL_DIM, lora_rank=4))
+    steve = CSteve1Model(_backbone(), CSteve1Config(goal_dim=GOAL_DIM, lora_rank=4))
     trainable = steve.trainable_parameters()
     assert trainable and all(n.startswith("condition.") or "lora_" in n for n in trainable)
     # every TrXL linear layer named in lora_targets got an adapter: 5 per layer, A and B each
@@ -75,7 +75,7 @@ def test_only_lora_and_conditioning_train() -> None:
 
 
 def test_goal_changes_the_policy_once_trained() -> None:
-    steve = SteveModel(_backbone(), SteveConfig(goal_dim=GOAL_DIM))
+    steve = CSteve1Model(_backbone(), CSteve1Config(goal_dim=GOAL_DIM))
     _randomise_trainable(steve)
     frames, first, goal = _inputs()
     a, _ = steve(frames, first, goal, steve.initial_state(2))
@@ -91,7 +91,7 @@ def test_head_goal_effect_depends_on_the_state_only_with_a_hidden_layer(
     vector; a hidden layer after the goal (C-Steve-1's head block, or the frozen VPT-style head
     of the C-VPT) makes the shift state-dependent."""
     backbone = _backbone(head_hidden=backbone_head_hidden)
-    steve = SteveModel(backbone, SteveConfig(goal_dim=GOAL_DIM, head_hidden=head_hidden))
+    steve = CSteve1Model(backbone, CSteve1Config(goal_dim=GOAL_DIM, head_hidden=head_hidden))
     _randomise_trainable(steve)
     has_block = any(n.startswith("head_block.") for n in steve.trainable_parameters())
     assert has_block == (head_hidden > 0)
@@ -111,7 +111,7 @@ def test_head_goal_effect_depends_on_the_state_only_with_a_hidden_layer(
 def test_film_goal_effect_depends_on_the_state_over_a_linear_head() -> None:
     """FiLM scales the TrXL features by the goal, so over the same linear head the goal's
     logit shift differs from state to state, and equals the linear head's shift of x * G z."""
-    steve = SteveModel(_backbone(), SteveConfig(goal_dim=GOAL_DIM, conditioning="film"))
+    steve = CSteve1Model(_backbone(), CSteve1Config(goal_dim=GOAL_DIM, conditioning="film"))
     _randomise_trainable(steve)
     assert "film_scale.weight" in steve.trainable_parameters()
     hidden = torch.randn(10, 1, 32, generator=torch.Generator().manual_seed(0))
@@ -132,8 +132,8 @@ def test_goal_hidden_reads_the_goal_nonlinearly_and_keeps_the_zero_goal(goal_hid
     frames, first, goal = _inputs()
     cvpt = _backbone()
     expected, _ = cvpt(frames, first, cvpt.initial_state(2))
-    config = SteveConfig(goal_dim=GOAL_DIM, conditioning="film", goal_hidden=goal_hidden)
-    steve = SteveModel(_backbone(), config)
+    config = CSteve1Config(goal_dim=GOAL_DIM, conditioning="film", goal_hidden=goal_hidden)
+    steve = CSteve1Model(_backbone(), config)
     logits, _ = steve(frames, first, goal, steve.initial_state(2))
     torch.testing.assert_close(logits, expected, rtol=1e-5, atol=1e-5)
     assert any(n.startswith("goal_net.") for n in steve.trainable_parameters()) == (goal_hidden > 0)
@@ -162,8 +162,8 @@ def test_guided_steps_equal_separate_conditional_and_unconditional_passes(
     conditioning: str, head_hidden: int
 ) -> None:
     """Step by step with cached memory, one batched forward = two full-history passes."""
-    config = SteveConfig(goal_dim=GOAL_DIM, conditioning=conditioning, head_hidden=head_hidden)
-    steve = SteveModel(_backbone(), config)
+    config = CSteve1Config(goal_dim=GOAL_DIM, conditioning=conditioning, head_hidden=head_hidden)
+    steve = CSteve1Model(_backbone(), config)
     _randomise_trainable(steve)
     frames, first, goal = _inputs(steps=6)
     scale = 1.5
@@ -184,11 +184,11 @@ def test_guided_steps_equal_separate_conditional_and_unconditional_passes(
 
 
 def test_bad_goal_shape_and_config_are_named() -> None:
-    steve = SteveModel(_backbone(), SteveConfig(goal_dim=GOAL_DIM))
+    steve = CSteve1Model(_backbone(), CSteve1Config(goal_dim=GOAL_DIM))
     frames, first, goal = _inputs()
     with pytest.raises(ValueError, match=r"goal must have shape \(2, 5, 8\)"):
         steve(frames, first, goal[..., :4], steve.initial_state(2))
     with pytest.raises(ValueError, match="head_hidden=-1"):
-        SteveConfig(head_hidden=-1)
+        CSteve1Config(head_hidden=-1)
     with pytest.raises(ValueError, match="conditioning='resnet'"):
-        SteveConfig(conditioning="resnet")  # type: ignore[arg-type]
+        CSteve1Config(conditioning="resnet")  # type: ignore[arg-type]

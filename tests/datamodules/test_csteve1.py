@@ -8,23 +8,23 @@ import numpy as np
 import pytest
 import torch
 
-from datamodules.steve import SteveDataModule
+from datamodules.csteve1 import CSteve1DataModule
 from zoo.cli import main
 from zoo.goals.embed import load_embedding_manifest, read_embedding_shard
 
 MAX_GAP = 6
 
 
-def _module(play: Path, embeddings: Path, **kwargs) -> SteveDataModule:
+def _module(play: Path, embeddings: Path, **kwargs) -> CSteve1DataModule:
     args = {
         "max_gap": MAX_GAP, "seq_len": 32, "batch_size": 2, "num_workers": 0, "val_fraction": 0.0,
         "test_fraction": 0.0, "shuffle_buffer": 1, "pin_memory": False, "noop_filter": False,
         "seed": 0,
     }
-    return SteveDataModule(str(play), str(embeddings), **{**args, **kwargs})
+    return CSteve1DataModule(str(play), str(embeddings), **{**args, **kwargs})
 
 
-def _batches(module: SteveDataModule, epoch: int = 0) -> list[dict[str, torch.Tensor]]:
+def _batches(module: CSteve1DataModule, epoch: int = 0) -> list[dict[str, torch.Tensor]]:
     return list(module.dataset("train", first_epoch=epoch))
 
 

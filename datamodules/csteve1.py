@@ -36,7 +36,7 @@ from zoo.goals.sources import (
 )
 
 
-class SteveDataModule(CrafterPlayDataModule):
+class CSteve1DataModule(CrafterPlayDataModule):
     """CrafterPlay sequences with relabelled C-CLIP goals (see the module docstring)."""
 
     extra_keys = GOAL_KEYS
@@ -194,8 +194,8 @@ class SteveDataModule(CrafterPlayDataModule):
         return self._caption_goals
 
     def _prior_goals(self, caption_ids: list[int]) -> dict[int, np.ndarray]:
-        """caption id -> (prior_samples, D) goals of its text, as SteveAgent draws them."""
-        from zoo.agents.steve_agent import GoalEncoder
+        """caption id -> (prior_samples, D) goals of its text, as CSteve1Agent draws them."""
+        from zoo.agents.csteve1_agent import GoalEncoder
 
         missing = [k for k in ("cclip", "prior") if not self.hparams.get(k)]
         if missing:
@@ -225,4 +225,4 @@ class SteveDataModule(CrafterPlayDataModule):
         return []
 
 
-__all__ = ["SteveDataModule"]
+__all__ = ["CSteve1DataModule"]

@@ -3,13 +3,13 @@
 - ``GoalEncoder``: a goal embedding from a text instruction (C-CLIP text tower, then the CVAE
   prior, paper §4.3 "Inference"), from a caption id (its caption text, the same way), or from a
   6-frame video clip (C-CLIP video tower, what training used).
-- ``StevePolicy``: ``initial_state(n)`` and ``act(frames, goals, state)``, one frame per env per
+- ``CSteve1Policy``: ``initial_state(n)`` and ``act(frames, goals, state)``, one frame per env per
   call with cached TrXL memory, classifier-free guidance with scale ``cfg_scale``; ``load``
   plays at the scale and temperature its export records, else the paper's and 1, and reads
   text through the goal models its export records (``goals``, built when first used).
 - ``instruction_note``: for an instruction that is not a caption, the caption C-CLIP finds
   nearest (free text is allowed; the note says what it resembles).
-- ``SteveAgent``: an ``InstructableAgent`` for ``zoo eval``/``zoo play`` (``instruct`` sets an
+- ``CSteve1Agent``: an ``InstructableAgent`` for ``zoo eval``/``zoo play`` (``instruct`` sets an
   env's instruction; it persists across episodes until changed; None plays without a goal).
 """
 
@@ -28,13 +28,13 @@ from zoo.envs.base import Step
 from zoo.models.cclip import CCLIPModel
 from zoo.models.prior import CVAEPrior
 from zoo.models.sampling import sample_actions
-from zoo.models.steve import SteveModel
+from zoo.models.csteve1 import CSteve1Model
 from zoo.models.trxl import TrXLState
 from zoo.weights.export import inference_settings, load_model, recorded_goal_models
 from zoo.weights.guidance import PAPER_CFG_SCALE
 
 
-def is_steve_checkpoint(checkpoint: dict) -> bool:
+def is_csteve1_checkpoint(checkpoint: dict) -> bool:
     return "backbone_config" in checkpoint.get("hyper_parameters", {})
 
 
@@ -118,7 +118,7 @@ def instruction_note(goals: GoalEncoder, text: str) -> str | None:
             f"nearest caption {caption!r} (C-CLIP cosine similarity {similarity:.2f})")
 
 
-class StevePolicy:
+class CSteve1Policy:
     """Steps N envs one frame at a time towards per-env goals, with classifier-free guidance.
 
     ``cfg_scale`` None is the paper's. ``goals`` reads text instructions through
@@ -128,7 +128,7 @@ class StevePolicy:
 
     def __init__(
         self,
-        model: SteveModel,
+        model: CSteve1Model,
         device: str | torch.device = "cpu",
         cfg_scale: float | None = None,
         temperature: float = 1.0,
@@ -184,7 +184,7 @@ class StevePolicy:
         seed: int = 0,
         cclip: str | Path | None = None,
         prior: str | Path | None = None,
-    ) -> StevePolicy:
+    ) -> CSteve1Policy:
         """The C-Steve-1 at ``path`` (export folder or ``.ckpt``). ``cfg_scale`` and
         ``temperature`` left None are what its export records (the settings its scores were
         measured at, ``zoo export --cfg-scale``), else the paper's and 1; a temperature of 0
@@ -286,15 +286,15 @@ class StevePolicy:
         return sample_actions(logits, self.temperature, self.greedy, u), state
 
 
-class SteveAgent:
+class CSteve1Agent:
     """``InstructableAgent`` for N envs: C-Steve-1 following each env's current instruction,
-    read through ``goals`` (None: the policy's own, ``StevePolicy.goals``)."""
+    read through ``goals`` (None: the policy's own, ``CSteve1Policy.goals``)."""
 
     name = "csteve1"
     needs_pixels = True
 
     def __init__(
-        self, policy: StevePolicy, num_envs: int, goals: GoalEncoder | None = None
+        self, policy: CSteve1Policy, num_envs: int, goals: GoalEncoder | None = None
     ) -> None:
         if goals is not None and goals.goal_dim != policy.goal_dim:
             raise ValueError(
@@ -352,7 +352,7 @@ class SteveAgent:
 
     def act(self, step: Step) -> np.ndarray:
         if step.frames is None:
-            raise ValueError("SteveAgent plays from pixels: make the env with pixels=True")
+            raise ValueError("CSteve1Agent plays from pixels: make the env with pixels=True")
         episodes = self._episodes
         actions, self._state = self.policy.act(
             step.frames, self._goal, self._state, episodes.first, episodes.uniforms()
@@ -363,8 +363,8 @@ class SteveAgent:
 
 __all__ = [
     "GoalEncoder",
-    "SteveAgent",
-    "StevePolicy",
+    "CSteve1Agent",
+    "CSteve1Policy",
     "instruction_note",
-    "is_steve_checkpoint",
+    "is_csteve1_checkpoint",
 ]

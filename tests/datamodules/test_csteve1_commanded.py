@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from datamodules.steve import SteveDataModule
+from datamodules.csteve1 import CSteve1DataModule
 from zoo.cli import main
 from zoo.data.reader import iter_episodes, list_shards
 from zoo.goals.embed import load_embedding_manifest, read_embedding_shard
@@ -47,7 +47,7 @@ def _records(embeddings: Path) -> dict[int, dict[str, np.ndarray]]:
     return out
 
 
-def _steps(module: SteveDataModule):
+def _steps(module: CSteve1DataModule):
     """(episode, step, goal, goal_step, goal_mask) of every step of every training batch."""
     for batch in module.dataset("train"):
         b, s = batch["actions"].shape
@@ -58,8 +58,8 @@ def _steps(module: SteveDataModule):
                        bool(batch["goal_mask"][i, t]))
 
 
-def _module(play: Path, embeddings: Path, **kwargs) -> SteveDataModule:
-    return SteveDataModule(str(play), str(embeddings), **{**ARGS, **kwargs})
+def _module(play: Path, embeddings: Path, **kwargs) -> CSteve1DataModule:
+    return CSteve1DataModule(str(play), str(embeddings), **{**ARGS, **kwargs})
 
 
 def test_commanded_steps_get_their_captions_mean_clip_embedding(play, embeddings) -> None:
@@ -132,7 +132,7 @@ def test_prior_goals_are_the_priors_goals_of_the_caption_text(
 ) -> None:
     """``commanded_goal: prior``: a commanded step's goal is what GoalEncoder gives its
     caption's text, the goal a typed instruction gets at play time."""
-    from zoo.agents.steve_agent import GoalEncoder
+    from zoo.agents.csteve1_agent import GoalEncoder
     from zoo.models.prior import CVAEPrior, PriorConfig
     from zoo.weights.export import save_exported
 

@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from zoo.cli import build_parser, main
-from zoo.eval import steve_tables
+from zoo.eval import csteve1_tables
 from zoo.eval.task_eval import wilson_interval
 
 # the commands of docs/results/csteve1.md, both games
@@ -36,7 +36,7 @@ def test_the_protocols_parse_with_the_docs_flags() -> None:
     assert table.protocol == "task-table" and table.env == ["craftax", "crafter"]
     assert (table.episodes, table.num_envs, table.seed, table.cfg_scale) == (100, 20, 1, 0.5)
     assert table.rows == ["cvpt", "csteve1", "csteve1_other"]
-    assert table.tasks == list(steve_tables.OTHER_INSTRUCTION)
+    assert table.tasks == list(csteve1_tables.OTHER_INSTRUCTION)
     assert table.cvpt == Path("weights/cvpt_tiny_cpu") and table.out == Path("runs/steve_table")
     sweep = parser.parse_args(CFG_SWEEP)
     assert sweep.protocol == "cfg-sweep" and sweep.cfg_scales == [0, 0.5, 1]
@@ -51,7 +51,7 @@ def test_the_protocols_parse_with_the_docs_flags() -> None:
     assert (defaults.env, defaults.episodes, defaults.num_envs) == (["craftax", "crafter"], 100, 20)
     # None: what the C-Steve-1 export records (else 1.5 and 1)
     assert (defaults.seed, defaults.cfg_scale, defaults.temperature) == (0, None, None)
-    assert defaults.rows == list(steve_tables.TABLE_ROWS)
+    assert defaults.rows == list(csteve1_tables.TABLE_ROWS)
 
 
 def test_versus_cvpt_states_disjoint_intervals_and_the_p_value() -> None:
@@ -65,7 +65,7 @@ def test_versus_cvpt_states_disjoint_intervals_and_the_p_value() -> None:
 
     rows = [row("collect_sapling", "csteve1", 38), row("collect_sapling", "cvpt", 27),
             row("collect_drink", "csteve1", 40), row("collect_drink", "cvpt", 25)]
-    assert steve_tables.versus_cvpt(rows) == [
+    assert csteve1_tables.versus_cvpt(rows) == [
         "crafter: C-Steve-1 ahead of C-VPT on 2 of 2 tasks (collect_sapling, collect_drink), "
         "disjoint 95% intervals on 1 (collect_drink); two-proportion p: collect_sapling 0.021, "
         "collect_drink 0.002"]
@@ -121,7 +121,7 @@ def tiny_models(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     from zoo.models.cclip import build_cclip
     from zoo.models.cvpt import CVPTConfig, CVPTModel
     from zoo.models.prior import CVAEPrior, PriorConfig
-    from zoo.models.steve import SteveConfig, SteveModel
+    from zoo.models.csteve1 import CSteve1Config, CSteve1Model
     from zoo.weights.export import save_exported
 
     root = tmp_path_factory.mktemp("models")
@@ -132,7 +132,7 @@ def tiny_models(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     ))
     paths = {"cvpt": save_exported(backbone, root / "cvpt")}  # before LoRA wraps its layers
     models = {
-        "csteve1": SteveModel(backbone, SteveConfig(goal_dim=64, lora_rank=2)),
+        "csteve1": CSteve1Model(backbone, CSteve1Config(goal_dim=64, lora_rank=2)),
         "cclip": build_cclip("smoke", vision_layers=1, text_layers=1),
         "prior": CVAEPrior(PriorConfig(embed_dim=64, hidden=16, latent_dim=4)),
     }
@@ -150,23 +150,23 @@ def test_task_table_writes_its_cells_and_summary_and_a_rerun_skips_them(
             "--out", str(tmp_path)]
     assert main(argv) == 0
     summary = json.loads((tmp_path / "summary_table.json").read_text())
-    assert [r["agent"] for r in summary] == list(steve_tables.TABLE_ROWS)
+    assert [r["agent"] for r in summary] == list(csteve1_tables.TABLE_ROWS)
     assert [r["instruction"] for r in summary] == [None, None, "obtain sapling", "obtain drink"]
-    for row in steve_tables.TABLE_ROWS:
+    for row in csteve1_tables.TABLE_ROWS:
         report = json.loads((tmp_path / "crafter" / "collect_sapling" / row / "report.json")
                             .read_text())
         assert report["episodes"] == 2 and report["agent"] == row
-        played_at = {"cfg_scale": 0.7, "temperature": 1.0} if row in steve_tables.STEVE_ROWS else {}
+        played_at = {"cfg_scale": 0.7, "temperature": 1.0} if row in csteve1_tables.STEVE_ROWS else {}
         assert {k: report[k] for k in ("cfg_scale", "temperature") if k in report} == played_at
     table = (tmp_path / "summary_table.md").read_text()
-    assert table.startswith(steve_tables.SUMMARY_HEADER)
+    assert table.startswith(csteve1_tables.SUMMARY_HEADER)
     assert "crafter: C-Steve-1 ahead of C-VPT on" in table and "of 1 tasks" in table
     assert "summary_table.md" in capsys.readouterr().out
 
     def no_playing(*args: object, **kwargs: object) -> None:
         raise AssertionError("a reported cell was played again")
 
-    monkeypatch.setattr(steve_tables, "evaluate_task", no_playing)
+    monkeypatch.setattr(csteve1_tables, "evaluate_task", no_playing)
     (tmp_path / "summary_table.md").unlink()
     assert main(argv) == 0
     assert (tmp_path / "summary_table.md").read_text() == table
@@ -199,7 +199,7 @@ def test_goal_check_ranks_every_task_instruction(
     _embedding_shard(tmp_path / "embed" / "embed-000000.tar", len(load_vocabulary().texts()), 64)
     assert main([*argv, "--min-count", "2"]) == 0
     rows = json.loads((tmp_path / "out" / "summary_goals.json").read_text())
-    instructions = {s.instruction for t in steve_tables.TASKS.values() for s in t.subtasks}
+    instructions = {s.instruction for t in csteve1_tables.TASKS.values() for s in t.subtasks}
     assert [r["instruction"] for r in rows] == sorted(instructions)
     assert all(r["caption_steps"] == 2 and 0 <= r["rank_of_mean_goal"] for r in rows)
     assert all(0 <= r["sampled_nearest_share"] <= 1 for r in rows)
@@ -211,19 +211,19 @@ def test_cfg_sweep_names_a_row_per_scale_and_plots_them(
 ) -> None:
     played = []
 
-    def cell(self: steve_tables.Setting, env_name: str, task: str, row: str, agent: object,
+    def cell(self: csteve1_tables.Setting, env_name: str, task: str, row: str, agent: object,
              instruction: str | None) -> dict:
         played.append((env_name, task, row, instruction))
         return {"episodes": 2, "successes": 1, "success_percent": 50.0,
                 "wilson95_percent": [9.5, 90.5],
                 "median_steps_to_success": 7.0}
 
-    monkeypatch.setattr(steve_tables.Setting, "steve", lambda self, cfg_scale: None)
-    monkeypatch.setattr(steve_tables.Setting, "cell", cell)
+    monkeypatch.setattr(csteve1_tables.Setting, "steve", lambda self, cfg_scale: None)
+    monkeypatch.setattr(csteve1_tables.Setting, "cell", cell)
     assert main(["eval", "cfg-sweep", "--csteve1", ".", "--cclip", ".", "--prior", ".",
                  "--env", "crafter", "--cfg-scales", "0", "1.5", "--out", str(tmp_path)]) == 0
     assert [p[2] for p in played] == ["csteve1_cfg0"] * 4 + ["csteve1_cfg1.5"] * 4
-    assert [p[1] for p in played[:4]] == list(steve_tables.CFG_TASKS)
+    assert [p[1] for p in played[:4]] == list(csteve1_tables.CFG_TASKS)
     rows = json.loads((tmp_path / "summary_sweep.json").read_text())
     assert [r["cfg_scale"] for r in rows] == [0] * 4 + [1.5] * 4
     assert "| crafter | collect_sapling | csteve1_cfg0 | obtain sapling | 50 (10-90) | 7 | 2 |" in (
