@@ -214,6 +214,7 @@ def plot(results: dict, out: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     records = list(results["cells"].values())
     games = sorted({g for r in records for g in r["scores"]})
@@ -230,6 +231,9 @@ def plot(results: dict, out: Path) -> None:
                 means.append(sum(ys) / len(ys))
             panel.plot(xs, means, marker=marker, label=game)
         panel.set_xscale("log")
+        ticks = sorted({axis_value(r, axis) for r in on_axis})
+        panel.set_xticks(ticks, [f"{x:g}" for x in ticks])  # the points, not log decades
+        panel.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         panel.set_xlabel(label)
         panel.grid(alpha=0.3)
     panels[0].set_ylabel("Crafter Score (%)")
