@@ -31,7 +31,8 @@ def checkpoint_kind(path: str | Path) -> str:
         return "csteve1" if is_csteve1_checkpoint(read_torch_file(path)) else "cvpt"
     if path.is_dir():
         if (path / "model.safetensors").is_file() or (path / "sha256.txt").is_file():
-            from zoo.weights.export import KINDS, exported_kind
+            from zoo.weights.export import exported_kind
+            from zoo.weights.kinds import KINDS
 
             kind = exported_kind(path)
             if kind not in ("cvpt", "csteve1"):

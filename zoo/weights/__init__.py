@@ -2,7 +2,7 @@
 
 ``load_model(path, kind=None)`` rebuilds any of the four networks (C-VPT, C-CLIP, the CVAE
 prior, C-Steve-1) without Lightning from a ``zoo fit`` ``.ckpt`` or a ``zoo export`` folder
-(``zoo/weights/export.py``: the kinds registry, export, checksums); ``inference_settings``
+(``zoo/weights/export.py``: export, checksums; ``zoo/weights/kinds.py``: the kinds); ``inference_settings``
 says what a model plays with beyond its weights (C-Steve-1's guidance scale and temperature, as
 its export records them); ``checkpoint_io`` reads torch files weights-only with errors that name
 the file. ``CVPTPolicy.load`` wraps ``load_model`` for acting, ``CSteve1Policy.load`` both.

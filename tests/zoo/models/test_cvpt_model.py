@@ -7,7 +7,7 @@ import torch
 
 from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import PAPER_PARAMS, CVPTConfig, CVPTModel
-from zoo.weights.export import config_from_hparams
+from zoo.weights.kinds import config_from_hparams
 
 SMALL = dict(d_model=32, d_ff=64, n_heads=2, n_layers=1, impala_channels=(4, 8, 8), encoder_hidden=32)
 
