@@ -208,6 +208,30 @@ def log_fit(points: dict[float, list[float]], at: float) -> dict[str, float]:
             "extrapolated": float(intercept + slope * np.log10(at))}
 
 
+def table(results: dict) -> str:
+    """The finished cells as a markdown table: each point's data and steps, and per game the
+    Crafter Score (± std over 5 chunks of 20) of each seed."""
+    games = results["plan"]["eval"]["games"]
+    seeds = results["plan"]["seeds"]
+    head = ["point", "frames", "unique episodes", "data steps", "cap"] + [
+        f"{g} seed {s}" for g in games for s in seeds]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    points: dict[str, dict[int, dict]] = {}
+    for record in results["cells"].values():
+        points.setdefault(record["point"], {})[record["seed"]] = record
+    for point, by_seed in points.items():
+        any_record = next(iter(by_seed.values()))
+        cells = [point, f"{any_record['frames'] / 1e6:.2f}M", f"{any_record['unique_episodes']:,}",
+                 f"{any_record['data_steps']:,}", f"{any_record['max_steps']:,}"]
+        for game in games:
+            for seed in seeds:
+                score = by_seed.get(seed, {}).get("scores", {}).get(game)
+                cells.append("not run" if score is None else
+                             f"{score['crafter_score']:.1f} ± {score['crafter_score_std']:.1f}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def plot(results: dict, out: Path) -> None:
     """One panel per axis: each seed's Crafter Score per game (dots) and their mean (line)."""
     import matplotlib
@@ -256,6 +280,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--list", action="store_true", help="print the cells and their state")
     parser.add_argument("--plot", type=Path, nargs="?", const=PLOT, metavar="PNG",
                         help=f"draw the curves from --out (default {PLOT}) and stop")
+    parser.add_argument("--table", action="store_true",
+                        help="print the finished cells as a markdown table, and stop")
     parser.add_argument("--fit", type=float, nargs="?", const=180e6, metavar="FRAMES",
                         help="print each game's log-linear fit of score against frames and its "
                         "value at FRAMES (default the paper's 180M), and stop")
@@ -266,6 +292,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.plot:
         plot(results, args.plot)
         print(f"wrote {args.plot}")
+        return 0
+    if args.table:
+        print(table(results))
         return 0
     if args.fit:
         for game in results["plan"]["eval"]["games"]:

@@ -107,3 +107,15 @@ def test_the_log_fit_matches_a_hand_computed_line() -> None:
     assert fit["rms_residual"] == pytest.approx(np.sqrt(2 / 3))
     with pytest.raises(ValueError, match="two distinct x"):
         scaling.log_fit({1e6: [1.0, 2.0]}, 1e8)
+
+
+def test_the_table_lists_each_seed_and_marks_the_cells_not_run() -> None:
+    record = {"point": "frames_1250", "seed": 0, "frames": 640_000, "unique_episodes": 2400,
+              "data_steps": 1_368_492, "max_steps": 600,
+              "scores": {"craftax": {"crafter_score": 4.21, "crafter_score_std": 0.49}}}
+    results = {"plan": {"seeds": [0, 1], "eval": {"games": ["craftax"]}},
+               "cells": {"frames_1250_seed0": record}}
+    lines = scaling.table(results).splitlines()
+    assert lines[0] == ("| point | frames | unique episodes | data steps | cap | craftax seed 0 "
+                        "| craftax seed 1 |")
+    assert lines[2] == "| frames_1250 | 0.64M | 2,400 | 1,368,492 | 600 | 4.2 ± 0.5 | not run |"
