@@ -110,7 +110,7 @@ class AgentSpec:
     cfg_scale: float | None = None
     cclip: str | None = None
     prior: str | None = None
-    expert_options: Mapping[str, Any] | None = None
+    expert_options: Mapping[str, Any] | None = dataclasses.field(default=None, hash=False)
 
     def __post_init__(self) -> None:
         for name in ("checkpoint", "cclip", "prior"):

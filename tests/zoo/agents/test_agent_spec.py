@@ -61,8 +61,9 @@ def test_the_kind_comes_from_the_checkpoint_and_the_record_pins_every_file() -> 
     told = AgentSpec(checkpoint=STEVE, cclip=CCLIP, prior=PRIOR).record()
     assert told["cclip_sha256"] == checkpoint_sha256(CCLIP)
     assert told["prior_sha256"] == checkpoint_sha256(PRIOR)
-    assert AgentSpec("scripted", expert_options={"plants_first": True}).record() == {
-        "kind": "scripted", "expert_options": {"plants_first": True}}
+    scripted = AgentSpec("scripted", expert_options={"plants_first": True})
+    assert scripted.record() == {"kind": "scripted", "expert_options": {"plants_first": True}}
+    assert hash(scripted) == hash(AgentSpec("scripted"))  # a dict field, still hashable
 
 
 def test_the_shipped_c_steve_1_names_its_goal_models() -> None:
