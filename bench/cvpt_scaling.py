@@ -283,8 +283,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--table", action="store_true",
                         help="print the finished cells as a markdown table, and stop")
     parser.add_argument("--fit", type=float, nargs="?", const=180e6, metavar="FRAMES",
-                        help="print each game's log-linear fit of score against frames and its "
-                        "value at FRAMES (default the paper's 180M), and stop")
+                        help="print each axis' and game's log-linear fit of the score (per "
+                        "tenfold), the frames line's value at FRAMES (default the paper's "
+                        "180M), and stop")
     args = parser.parse_args(argv)
     plan = load_plan(args.plan)
     results: dict[str, Any] = (json.loads(args.out.read_text()) if args.out.exists()
@@ -297,9 +298,14 @@ def main(argv: list[str] | None = None) -> int:
         print(table(results))
         return 0
     if args.fit:
-        for game in results["plan"]["eval"]["games"]:
-            points = {x * 1e6: ys for x, ys in axis_means(results, "frames", game).items()}
-            print(game, json.dumps(log_fit(points, args.fit)))
+        for axis in AXES:
+            for game in results["plan"]["eval"]["games"]:
+                points = axis_means(results, axis, game)
+                if axis == "frames":
+                    points = {x * 1e6: ys for x, ys in points.items()}
+                if len(points) >= 2:
+                    at = args.fit if axis == "frames" else max(points)
+                    print(axis, game, json.dumps(log_fit(points, at)))
         return 0
     todo = [c for c in cells(plan) if c.name not in results["cells"]]
     if args.only:
