@@ -49,7 +49,7 @@ def test_an_evaluation_reports_the_pinned_score(tmp_path: Path) -> None:
 
 def test_an_instruction_matrix_plays_the_pinned_rows(tmp_path: Path) -> None:
     out = tmp_path / "matrix"
-    assert main(["eval", "instructions", "--agent", "scripted", "--env", "crafter", "--episodes",
+    assert main(["tables", "instructions", "--agent", "scripted", "--env", "crafter", "--episodes",
                  "2", "--num-envs", "2", "--max-steps", "40", "--instructions", "obtain sapling",
                  "--seed", "6", "--out", str(out)]) == 0
     for row, episodes in MATRIX_ROWS.items():

@@ -31,7 +31,7 @@ def test_play(tmp_path: Path) -> None:
 
 def test_the_instruction_matrix(tmp_path: Path) -> None:
     out = tmp_path / "matrix"
-    assert main(["eval", "instructions", "--checkpoint", STEVE, "--env", "crafter",
+    assert main(["tables", "instructions", "--checkpoint", STEVE, "--env", "crafter",
                  "--episodes", "2", "--num-envs", "2", "--max-steps", "10", "--instructions",
                  "obtain drink", "--out", str(out)]) == 0
     agent = json.loads((out / "report.json").read_text())["setting"]["agent"]

@@ -169,11 +169,11 @@ def test_cfg_scale_is_for_c_steve_1_only(tmp_path: Path, capsys: pytest.CaptureF
     ("command", "default"),
     [
         (["eval"], "the scale its export records, else the paper's 1.5"),
-        (["eval", "task-table"], "the scale its export records, else the paper's 1.5"),
+        (["tables", "task-table"], "the scale its export records, else the paper's 1.5"),
         (["play"], "the scale its export records, else the paper's 1.5"),
         (["export"], "recorded in config.json as what it plays at (default: the paper's 1.5)"),
     ],
-    ids=["eval", "task-table", "play", "export"],
+    ids=["tables", "task-table", "play", "export"],
 )
 def test_help_says_where_the_default_scale_comes_from(
     command: list[str], default: str, capsys: pytest.CaptureFixture

@@ -1,6 +1,7 @@
 """``zoo eval``: play an agent for N episodes and write the Crafter evaluation report, or, with
-``--task``, its success on a task suite (``zoo.envs.tasks``); its subcommands run C-Steve-1's
-results protocol (``zoo.eval.csteve1_tables``)."""
+``--task``, its success on a task suite (``zoo.envs.tasks``); ``zoo tables``: many such
+reports under one folder, C-Steve-1's results protocol (``zoo.eval.csteve1_tables``) and the
+instruction matrix (``zoo.eval.instruction_matrix``)."""
 
 from __future__ import annotations
 
@@ -25,20 +26,21 @@ Score and normalized Return as mean ± std over 5 chunks of the episodes (100 ep
 Writes OUT/report.json (also how episodes ended: survived, lava, zombie, arrow, a need at 0),
 OUT/stats.jsonl (crafter's Recorder format), OUT/achievements.png and OUT/episode.gif. Episode j is seeded from (--seed, j), so --num-envs changes speed, not results.
 Frames are rendered when the agent reads pixels or a GIF is wanted; a state-only expert with
---no-gif skips rendering: crafter ~3,200 vs ~700 env-steps/s, Craftax ~5,900 vs ~2,400 (1 core).
+--no-gif skips rendering, which plays several times faster.
 
 With --task NAME it plays a task instead (docs/tasks.md) and writes OUT/report.json and
 OUT/report.md: success rate with a Wilson 95% interval, median steps to success, sub-task
 completion. An instructable agent gets --instruction after every reset, or with --chain the
 heuristic planner's instructions; with neither, each sub-task's own caption in turn.
 
-The subcommands below are C-Steve-1's results protocol (docs/results/csteve1.md): many task
-reports under one OUT and a summary; see `zoo eval task-table --help`.
+Many such reports under one OUT with a summary (C-Steve-1's task table, CFG sweep and goal
+check; the instruction matrix of any instructable agent) are `zoo tables`.
 """
-USAGE = """\
-%(prog)s --env {craftax,crafter} (--agent NAME | --checkpoint PATH) [options]
-       %(prog)s {task-table,cfg-sweep,goal-check} ... (C-Steve-1's results protocol)
-       %(prog)s instructions ... (the instruction matrix of any instructable agent)"""
+USAGE = "%(prog)s --env {craftax,crafter} (--agent NAME | --checkpoint PATH) [options]"
+TABLES_DESCRIPTION = """\
+Results tables: many `zoo eval` reports under one OUT and a summary. C-Steve-1's results
+protocol (docs/results/csteve1.md): task-table, cfg-sweep, goal-check; and the instruction
+matrix of any instructable agent: instructions. See `zoo tables TABLE --help`."""
 PROTOCOLS = {  # subcommand -> (its summary's mode name, one-line help)
     "task-table": ("table", (
         "single-step tasks: random, C-VPT, C-Steve-1 with its instruction and with another task's"
@@ -64,8 +66,7 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_agent_flags(p)
-    # required, but checked by run_eval: the protocols take their own --env (several games)
-    p.add_argument("--env", choices=ENV_NAMES, help="game to play in (required)")
+    p.add_argument("--env", choices=ENV_NAMES, required=True, help="game to play in")
     p.add_argument("--episodes", type=positive_int, default=100, help="episodes (default 100)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="run seed (default 0)")
     p.add_argument(
@@ -95,10 +96,11 @@ def register(subparsers) -> None:
         help="with --task: the heuristic planner chains instructions to the agent",
     )
     p.set_defaults(handler=run_eval)
-    protocols = p.add_subparsers(
-        dest="protocol", metavar="PROTOCOL", prog=p.prog,
-        title="C-Steve-1's results protocol (docs/results/csteve1.md)",
+    tables = subparsers.add_parser(
+        "tables", help="results tables: C-Steve-1's task table, CFG sweep, goal check; the "
+        "instruction matrix", description=TABLES_DESCRIPTION,
     )
+    protocols = tables.add_subparsers(dest="protocol", metavar="TABLE", required=True)
     for name, (mode, line) in PROTOCOLS.items():
         sub = protocols.add_parser(name, help=line, description=_protocol_description(mode, line))
         sub.add_argument("--out", type=out_dir, required=True, help="folder of all reports")
@@ -226,8 +228,6 @@ def run_eval(args: argparse.Namespace) -> int:
     num_envs = min(args.num_envs, args.episodes)
     now = datetime.now(UTC)
     try:
-        if args.env is None:
-            raise UsageError("the following arguments are required: --env")
         if args.out is None:
             who = args.agent or "checkpoint"
             what = args.env if args.task is None else f"{args.task}-{args.env}"
@@ -339,7 +339,7 @@ def run_task_eval(
 
 
 def run_protocol(args: argparse.Namespace) -> int:
-    """``zoo eval task-table|cfg-sweep|goal-check``: C-Steve-1's results protocol, written by
+    """``zoo tables task-table|cfg-sweep|goal-check``: C-Steve-1's results protocol, written by
     ``zoo.eval.csteve1_tables`` under --out with a summary_<mode>.md/.json."""
     from zoo.eval import csteve1_tables
 
@@ -361,7 +361,7 @@ def run_protocol(args: argparse.Namespace) -> int:
             rows = (csteve1_tables.table(setting, args.tasks, args.rows, args.cvpt, args.cfg_scale)
                     if mode == "table" else csteve1_tables.sweep(setting, args.cfg_scales))
     except UsageError as err:
-        print(f"zoo eval {args.protocol}: error: {err}", file=sys.stderr)
+        print(f"zoo tables {args.protocol}: error: {err}", file=sys.stderr)
         return 2
     written = csteve1_tables.write_summary(args.out, mode, rows)
     print(f"wrote {', '.join(str(path) for path in written)}")
@@ -395,7 +395,7 @@ def _protocol_steve(args: argparse.Namespace) -> AgentSpec | None:
 
 
 def _register_instruction_matrix(protocols) -> None:
-    """``zoo eval instructions``: for any instructable agent, named as ``zoo eval`` names it."""
+    """``zoo tables instructions``: for any instructable agent, named as ``zoo eval`` names it."""
     from zoo.eval import instruction_matrix as matrix
     p = protocols.add_parser("instructions", help=matrix.HELP, description=matrix.DESCRIPTION)
     add_agent_flags(p, agent="who plays (scripted: goal-directed; default: the agent "
@@ -409,7 +409,7 @@ def _register_instruction_matrix(protocols) -> None:
 
 
 def run_instruction_matrix(args: argparse.Namespace) -> int:
-    """``zoo eval instructions``: play or read every row, then write the report."""
+    """``zoo tables instructions``: play or read every row, then write the report."""
     from zoo.eval import instruction_matrix as matrix
     num_envs = min(args.num_envs, args.episodes)
     try:
@@ -420,7 +420,7 @@ def run_instruction_matrix(args: argparse.Namespace) -> int:
         matrix.check_saved(args.out, args.env, columns, setting)
         horizons = matrix.check_horizons(args.horizons, args.max_steps)
     except ValueError as err:
-        print(f"zoo eval instructions: error: {err}", file=sys.stderr)
+        print(f"zoo tables instructions: error: {err}", file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
     report = matrix.run(agent, setting, args.env, columns, args.out, num_envs, horizons)

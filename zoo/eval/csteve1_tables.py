@@ -1,10 +1,10 @@
 """C-Steve-1's results protocol: who solves the single-step tasks, and how CFG helps (the
 tables of docs/results/csteve1.md).
 
-``table`` (``zoo eval task-table``), per game and single-step task: random play, unconditioned
+``table`` (``zoo tables task-table``), per game and single-step task: random play, unconditioned
 C-VPT (the backbone C-Steve-1 was trained from), C-Steve-1 given the task's own instruction, and
 C-Steve-1 given a *different* task's instruction (the control: if that scores like the right
-one, the agent follows its prior, not the words). ``sweep`` (``zoo eval cfg-sweep``): C-Steve-1
+one, the agent follows its prior, not the words). ``sweep`` (``zoo tables cfg-sweep``): C-Steve-1
 on the paper's four CFG tasks at several guidance scales, plotted. ``goals`` (``zoo eval
 goal-check``) checks the goal pipeline without playing: does the prior's goal for each task
 instruction land nearest that caption's video embeddings (``zoo.eval.goal_check``)?

@@ -1,4 +1,4 @@
-"""The instruction matrix (``zoo eval instructions``): does an agent do what it is told, rather
+"""The instruction matrix (``zoo tables instructions``): does an agent do what it is told, rather
 than what it does anyway?
 
 Rows are instructions (each of ``COLUMNS``, then no instruction), columns the achievements those

@@ -1,4 +1,4 @@
-"""`zoo eval task-table|cfg-sweep|goal-check`: C-Steve-1's results protocol as commands, beside
+"""`zoo tables task-table|cfg-sweep|goal-check`: C-Steve-1's results protocol as commands, beside
 the plain `zoo eval` that still needs --env."""
 
 from __future__ import annotations
@@ -17,13 +17,13 @@ from zoo.eval import csteve1_tables
 from zoo.eval.task_eval import wilson_interval
 
 # the commands of docs/results/csteve1.md, both games
-GOAL_CHECK = ["eval", "goal-check", "--cclip", "weights/cclip_cpu", "--prior", "weights/prior_cpu",
+GOAL_CHECK = ["tables", "goal-check", "--cclip", "weights/cclip_cpu", "--prior", "weights/prior_cpu",
               "--embeddings", ".", "--out", "runs/steve_goals"]
-CFG_SWEEP = ["eval", "cfg-sweep", "--csteve1", "weights/csteve1_cpu", "--cclip",
+CFG_SWEEP = ["tables", "cfg-sweep", "--csteve1", "weights/csteve1_cpu", "--cclip",
              "weights/cclip_cpu", "--prior", "weights/prior_cpu", "--env", "craftax", "crafter",
              "--episodes", "20", "--num-envs", "10", "--out", "runs/steve_sweep",
              "--cfg-scales", "0", "0.5", "1"]
-TASK_TABLE = ["eval", "task-table", "--cvpt", "weights/cvpt_tiny_cpu", "--csteve1",
+TASK_TABLE = ["tables", "task-table", "--cvpt", "weights/cvpt_tiny_cpu", "--csteve1",
               "weights/csteve1_cpu", "--cclip", "weights/cclip_cpu", "--prior",
               "weights/prior_cpu", "--env", "craftax", "crafter", "--episodes", "100",
               "--num-envs", "20", "--seed", "1", "--cfg-scale", "0.5", "--rows", "cvpt",
@@ -46,8 +46,9 @@ def test_the_protocols_parse_with_the_docs_flags() -> None:
     assert (goals.max_shards, goals.min_count, goals.samples) == (12, 50, 20)
     assert table.handler is sweep.handler is goals.handler
     plain = parser.parse_args(["eval", "--env", "crafter", "--checkpoint", "x.ckpt"])
-    assert plain.protocol is None and plain.env == "crafter" and plain.handler is not table.handler
-    defaults = parser.parse_args(["eval", "task-table", "--out", "o"])
+    assert "protocol" not in vars(plain) and plain.env == "crafter"
+    assert plain.handler is not table.handler
+    defaults = parser.parse_args(["tables", "task-table", "--out", "o"])
     assert (defaults.env, defaults.episodes, defaults.num_envs) == (["craftax", "crafter"], 100, 20)
     # None: what the C-Steve-1 export records (else 1.5 and 1)
     assert (defaults.seed, defaults.cfg_scale, defaults.temperature) == (0, None, None)
@@ -71,20 +72,23 @@ def test_versus_cvpt_states_disjoint_intervals_and_the_p_value() -> None:
         "collect_drink 0.002"]
 
 
-def test_eval_help_lists_the_protocols(capsys: pytest.CaptureFixture) -> None:
+def test_tables_help_lists_the_tables(capsys: pytest.CaptureFixture) -> None:
     with pytest.raises(SystemExit) as exit_info:
-        main(["eval", "--help"])
+        main(["tables", "--help"])
     assert exit_info.value.code == 0
     out = capsys.readouterr().out
-    for name in ("task-table", "cfg-sweep", "goal-check"):
-        assert f"    {name} " in out, name
+    for name in ("task-table", "cfg-sweep", "goal-check", "instructions"):
+        assert f"    {name}" in out, name
 
 
-def test_plain_eval_still_needs_env(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    assert main(["eval", "--agent", "random", "--out", str(tmp_path / "run")]) == 2
-    err = capsys.readouterr().err
-    assert err == "zoo eval: error: the following arguments are required: --env\n"
+def test_eval_is_one_command_that_needs_env(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["eval", "--agent", "random", "--out", str(tmp_path / "run")])
+    assert exit_info.value.code == 2
+    assert "the following arguments are required: --env" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()
+    with pytest.raises(SystemExit):
+        main(["eval", "task-table", "--out", str(tmp_path)])  # the tables are `zoo tables`
 
 
 @pytest.mark.parametrize(
@@ -99,8 +103,8 @@ def test_plain_eval_still_needs_env(tmp_path: Path, capsys: pytest.CaptureFixtur
 def test_missing_checkpoints_are_one_line_errors(
     tmp_path: Path, capsys: pytest.CaptureFixture, argv: list[str], message: str
 ) -> None:
-    assert main(["eval", *argv, "--out", str(tmp_path)]) == 2
-    assert capsys.readouterr().err == f"zoo eval {argv[0]}: error: {message}\n"
+    assert main(["tables", *argv, "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == f"zoo tables {argv[0]}: error: {message}\n"
 
 
 def test_sweep_and_goal_check_require_their_checkpoints(
@@ -108,7 +112,7 @@ def test_sweep_and_goal_check_require_their_checkpoints(
 ) -> None:
     for argv in (["cfg-sweep"], ["goal-check", "--embeddings", str(tmp_path)]):
         with pytest.raises(SystemExit) as exit_info:
-            main(["eval", *argv, "--out", str(tmp_path)])
+            main(["tables", *argv, "--out", str(tmp_path)])
         assert exit_info.value.code == 2
         assert "the following arguments are required: " in capsys.readouterr().err
 
@@ -145,7 +149,7 @@ def test_task_table_writes_its_cells_and_summary_and_a_rerun_skips_them(
     tiny_models: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    argv = ["eval", "task-table", *(f"--{k}={v}" for k, v in tiny_models.items()),
+    argv = ["tables", "task-table", *(f"--{k}={v}" for k, v in tiny_models.items()),
             "--env", "crafter", "--tasks", "collect_sapling", "--episodes", "2", "--num-envs", "2",
             "--out", str(tmp_path)]
     assert main(argv) == 0
@@ -191,7 +195,7 @@ def test_goal_check_ranks_every_task_instruction(
     from zoo.captions.vocabulary import load_vocabulary
 
     (tmp_path / "embed").mkdir()
-    argv = ["eval", "goal-check", "--cclip", str(tiny_models["cclip"]), "--prior",
+    argv = ["tables", "goal-check", "--cclip", str(tiny_models["cclip"]), "--prior",
             str(tiny_models["prior"]), "--embeddings", str(tmp_path / "embed"), "--samples", "2",
             "--out", str(tmp_path / "out")]
     assert main(argv) == 2
@@ -220,7 +224,7 @@ def test_cfg_sweep_names_a_row_per_scale_and_plots_them(
 
     monkeypatch.setattr(csteve1_tables.Setting, "steve", lambda self, cfg_scale: None)
     monkeypatch.setattr(csteve1_tables.Setting, "cell", cell)
-    assert main(["eval", "cfg-sweep", "--csteve1", ".", "--cclip", ".", "--prior", ".",
+    assert main(["tables", "cfg-sweep", "--csteve1", ".", "--cclip", ".", "--prior", ".",
                  "--env", "crafter", "--cfg-scales", "0", "1.5", "--out", str(tmp_path)]) == 0
     assert [p[2] for p in played] == ["csteve1_cfg0"] * 4 + ["csteve1_cfg1.5"] * 4
     assert [p[1] for p in played[:4]] == list(csteve1_tables.CFG_TASKS)

@@ -1,4 +1,4 @@
-"""`zoo eval instructions`: the verdict on hand-made matrices, the Wilson cells, and the command
+"""`zoo tables instructions`: the verdict on hand-made matrices, the Wilson cells, and the command
 end to end with the scripted expert (played once, then read back)."""
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ HAND_MADE = {
     NO_INSTRUCTION: (5, 7, 15),
 }
 # the command of docs/results/csteve1.md
-DOCS_COMMAND = ["eval", "instructions", "--checkpoint", "weights/csteve1_cpu", "--cclip",
+DOCS_COMMAND = ["tables", "instructions", "--checkpoint", "weights/csteve1_cpu", "--cclip",
                 "weights/cclip_cpu", "--prior", "weights/prior_cpu", "--cfg-scale", "0.5",
                 "--env", "craftax", "crafter", "--episodes", "50", "--max-steps", "200",
                 "--num-envs", "25", "--seed", "5", "--out", "runs/instructions/csteve1_cpu"]
@@ -154,7 +154,7 @@ def test_the_docs_command_parses() -> None:
     assert (args.episodes, args.max_steps, args.num_envs, args.seed) == (50, 200, 25, 5)
     assert args.env == ["craftax", "crafter"] and args.cfg_scale == 0.5
     assert args.checkpoint == Path("weights/csteve1_cpu") and args.instructions is None
-    defaults = build_parser().parse_args(["eval", "instructions", "--agent", "scripted",
+    defaults = build_parser().parse_args(["tables", "instructions", "--agent", "scripted",
                                           "--out", "o"])
     assert (defaults.max_steps, defaults.episodes, defaults.cfg_scale) == (200, 100, None)
 
@@ -163,7 +163,7 @@ def test_the_scripted_expert_plays_the_matrix_then_a_rerun_reads_it(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
     out = tmp_path / "matrix"
-    argv = ["eval", "instructions", "--agent", "scripted", "--env", "crafter", "--episodes", "2",
+    argv = ["tables", "instructions", "--agent", "scripted", "--env", "crafter", "--episodes", "2",
             "--num-envs", "2", "--max-steps", "40", "--instructions", "obtain sapling",
             "--horizons", "20", "--out", str(out)]
     assert main(argv) == 0
@@ -221,8 +221,8 @@ def test_the_scripted_expert_plays_the_matrix_then_a_rerun_reads_it(
 def test_bad_input_is_a_one_line_error(
     flags: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:
-    assert main(["eval", "instructions", *flags, "--out", str(tmp_path / "m")]) == 2
+    assert main(["tables", "instructions", *flags, "--out", str(tmp_path / "m")]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("zoo eval instructions: error: ") and err.count("\n") == 1
+    assert err.startswith("zoo tables instructions: error: ") and err.count("\n") == 1
     assert message in err
     assert not (tmp_path / "m").exists()
