@@ -38,7 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
         description=(
             "crafter-zoo: the CrafterDojo suite for Crafter. Generate expert data "
             "(zoo data generate), score agents in Craftax-Classic or crafter (zoo eval; task "
-            "suites with zoo eval --task), train models with LightningCLI (zoo fit --config "
+            "suites with zoo eval --task; results tables with zoo tables), train models with LightningCLI (zoo fit --config "
             "configs/cvpt_smoke.yaml), watch C-Steve-1 follow an instruction (zoo play), train "
             "the RL agents on the long-horizon tasks (zoo rl train --config "
             "configs/rl/cvpt_rl_t2.yaml), or run it all with one report (zoo pipeline --config "
