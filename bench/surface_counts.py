@@ -1,10 +1,10 @@
 """How much surface the package has: what issue 50 counts before and after (flag declarations,
 copies of the guidance default, the generation loop's lines, package lines).
 
-  .venv/bin/python bench/surface_counts.py [--root CHECKOUT] [--out bench/results/surface.json]
+  .venv/bin/python bench/surface_counts.py [--root CHECKOUT ...] [--out bench/results/surface.json]
 
-``--root`` counts another checkout (a ``git worktree`` of an older commit, say), so the two
-numbers come from one script.
+Each ``--root`` is a checkout (a ``git worktree`` of an older commit, say; default this one),
+so before and after come from one script; the JSON maps each checkout's commit to its counts.
 """
 
 from __future__ import annotations
@@ -59,10 +59,11 @@ def count(root: Path) -> dict:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--root", type=Path, default=Path(__file__).resolve().parents[1])
+    parser.add_argument("--root", type=Path, nargs="+",
+                        default=[Path(__file__).resolve().parents[1]])
     parser.add_argument("--out", type=Path, help="also write the counts here (JSON)")
     args = parser.parse_args()
-    counts = count(args.root.resolve())
+    counts = {c["commit"]: c for c in (count(root.resolve()) for root in args.root)}
     print(json.dumps(counts, indent=2))
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
