@@ -26,9 +26,9 @@ from torch.nn import functional as F
 from zoo.agents.base import EpisodeStreams
 from zoo.envs.base import Step
 from zoo.models.cclip import CCLIPModel
+from zoo.models.csteve1 import CSteve1Model
 from zoo.models.prior import CVAEPrior
 from zoo.models.sampling import sample_actions
-from zoo.models.csteve1 import CSteve1Model
 from zoo.models.trxl import TrXLState
 from zoo.weights.export import inference_settings, load_model, recorded_goal_models
 from zoo.weights.guidance import PAPER_CFG_SCALE
