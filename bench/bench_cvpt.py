@@ -117,7 +117,7 @@ def bf16_vs_fp32(batch_size: int, seq_len: int, steps: int, input_downsample: in
     (configs/cvpt_tiny_cpu.yaml's precision); alternated so load drifts hit both alike."""
     torch.manual_seed(0)
     module = CVPT(model="tiny", tbptt_len=seq_len, cosine_steps=100,
-                  input_downsample=input_downsample, activation_checkpointing=False)
+                  input_downsample=input_downsample)
     optimizer = module.configure_optimizers()["optimizer"]
     module.train()
     batch = {
@@ -147,7 +147,7 @@ def training_throughput(
     """Seconds per optimizer step on in-memory frames vs on the datamodule's batches."""
     torch.manual_seed(0)
     module = CVPT(model="tiny", tbptt_len=seq_len, cosine_steps=100,
-                  input_downsample=input_downsample, activation_checkpointing=False)
+                  input_downsample=input_downsample)
     optimizer = module.configure_optimizers()["optimizer"]
     module.train()
 

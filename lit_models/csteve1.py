@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import torch
 
-from lit_models.sequence_bc import IGNORE_ACTION, SequenceBC, UpdateEvery
+from lit_models.sequence_bc import IGNORE_ACTION, SequenceBC
 from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 from zoo.models.csteve1 import Conditioning, CSteve1Config, CSteve1Model
@@ -39,7 +39,6 @@ class CSteve1(SequenceBC):
         lora_dropout: float = 0.0,
         lora_targets: list[str] | None = None,
         tbptt_len: int = 64,
-        update_every: UpdateEvery = "window",
         max_grad_norm: float | None = 5.0,
         lr: float = 1e-5,
         weight_decay: float = 1e-4,
@@ -48,7 +47,6 @@ class CSteve1(SequenceBC):
         cosine_steps: int | None = None,
         min_lr_ratio: float = 0.0,
         label_smoothing: float = 0.0,
-        activation_checkpointing: bool = True,
         init_weights: str | None = None,
         backbone_config: dict | None = None,
     ) -> None:
@@ -66,8 +64,6 @@ class CSteve1(SequenceBC):
         lora_dropout: dropout on the LoRA branch.
         lora_targets: TrXL linear layers given LoRA (None: query, key_value, out, ff.0, ff.3).
         tbptt_len: window of truncated backprop (paper: 64).
-        update_every: ``window``: one optimizer step per TBPTT window (the paper's: its training
-            code follows STEVE-1's); ``batch``: one per batch (a departure).
         max_grad_norm: clip the gradient norm to this before each step (paper: 5; None: none).
             Replaces ``trainer.gradient_clip_val``.
         lr: peak AdamW learning rate (paper: 1e-5).
@@ -77,7 +73,6 @@ class CSteve1(SequenceBC):
         cosine_steps: steps of the cosine decay (None: trainer.max_steps).
         min_lr_ratio: final LR as a fraction of ``lr``.
         label_smoothing: cross-entropy label smoothing.
-        activation_checkpointing: with ``update_every: batch``, recompute each window in backward.
         init_weights: a C-Steve-1 ``.ckpt`` or ``zoo export`` folder of the same architecture
             whose weights start this run with a fresh optimizer and schedule (a DAgger round
             fine-tunes the last round's); a ``--ckpt_path`` resume keeps its own weights.
@@ -86,7 +81,6 @@ class CSteve1(SequenceBC):
         """
         super().__init__()
         self.save_hyperparameters()
-        self.check_update_every()
         if backbone is None and backbone_config is None:
             raise ValueError(
                 "model.init_args.backbone is required: a C-VPT .ckpt from `zoo fit` or a "

@@ -7,7 +7,7 @@ with C-Steve-1; this module builds the network from a preset and optional starti
 
 from __future__ import annotations
 
-from lit_models.sequence_bc import SequenceBC, UpdateEvery
+from lit_models.sequence_bc import SequenceBC
 from zoo.envs.constants import NUM_ACTIONS
 from zoo.models.cvpt import CVPTConfig, CVPTModel
 
@@ -33,7 +33,6 @@ class CVPT(SequenceBC):
         input_downsample: int | None = None,
         head_hidden: int | None = None,
         tbptt_len: int = 64,
-        update_every: UpdateEvery = "window",
         max_grad_norm: float | None = 5.0,
         lr: float = 5e-4,
         weight_decay: float = 1e-4,
@@ -42,7 +41,6 @@ class CVPT(SequenceBC):
         cosine_steps: int | None = None,
         min_lr_ratio: float = 0.0,
         label_smoothing: float = 0.0,
-        activation_checkpointing: bool = True,
         init_weights: str | None = None,
     ) -> None:
         """Args:
@@ -64,8 +62,6 @@ class CVPT(SequenceBC):
             head_hidden: width of the policy head's hidden layer (None: 0, one linear layer;
                 VPT's head has one, and C-Steve-1's head conditioning needs it).
             tbptt_len: window of truncated backprop; the sequence is cut into these.
-            update_every: ``window``: one optimizer step per TBPTT window (the paper's, as
-                STEVE-1); ``batch``: one per batch (a departure; lit_models.sequence_bc).
             max_grad_norm: clip the gradient norm to this before each step (paper: 5; None:
                 no clipping). Replaces ``trainer.gradient_clip_val``.
             lr: peak AdamW learning rate (paper: 5e-4 tiny/base, 1e-4 large).
@@ -75,8 +71,6 @@ class CVPT(SequenceBC):
             cosine_steps: steps of the cosine decay (None: trainer.max_steps).
             min_lr_ratio: final LR as a fraction of ``lr``.
             label_smoothing: cross-entropy label smoothing.
-            activation_checkpointing: with ``update_every: batch``, recompute each TBPTT window
-                in backward (memory of one window instead of the whole sequence).
             init_weights: a C-VPT ``.ckpt`` or ``zoo export`` folder whose network starts this
                 run with a fresh optimizer and schedule (fine-tuning, or training on past a
                 finished cosine); same architecture required. Loaded in ``setup``, so
@@ -84,7 +78,6 @@ class CVPT(SequenceBC):
         """
         super().__init__()
         self.save_hyperparameters()
-        self.check_update_every()
         overrides = {
             "d_model": d_model,
             "d_ff": d_ff,

@@ -2,43 +2,32 @@
 
 Truncated BPTT: a batch holds long sequences (paper: 640 steps) that the module cuts into
 windows of ``tbptt_len`` (64). The TrXL memory flows from one window into the next with
-stop-gradient. How often the optimizer steps is ``update_every``:
+stop-gradient. The optimizer steps once per window (the paper's; STEVE-1's training loop,
+which the paper says C-Steve-1 follows): forward, backward and one step per window, so one
+step sees batch x tbptt_len frames (128 x 64 = 8,192 at the paper's sizes) and a 640-step
+batch makes 10 steps. The memory carried into the next window was made by the weights before
+the step, and activation memory is one window's whatever the sequence length.
 
-- ``window`` (the paper's; STEVE-1's training loop, which the paper says C-Steve-1 follows):
-  forward, backward and one optimizer step per window, so one step sees batch x tbptt_len
-  frames (128 x 64 = 8,192 at the paper's sizes) and a 640-step batch makes 10 steps. The
-  memory carried into the next window was made by the weights before the step.
-- ``batch`` (a departure from the paper, to compare against per-window stepping): the loss is
-  the mean over every step of the batch and the optimizer steps once per batch. Its gradient
-  is the whole batch's, window-by-window memory included; with ``activation_checkpointing``
-  each window is recomputed during backward, so activation memory is one window's, not the
-  sequence's, for ~1/3 more compute (per-window stepping has one window's activations anyway).
-
-With sequences of ``tbptt_len`` steps (the CPU recipes) the two are the same. The module steps
-its optimizer itself (Lightning's manual optimization), so gradient clipping is the module's
-``max_grad_norm`` (the paper's "Max Grad Norm", applied in ``on_before_optimizer_step`` where
-the gradients are unscaled), not ``trainer.gradient_clip_val``, and the LR
-schedule advances once per optimizer step; ``trainer.global_step`` and ``trainer.max_steps``
-count optimizer steps in both modes.
+The module steps its optimizer itself (Lightning's manual optimization), so gradient clipping
+is the module's ``max_grad_norm`` (the paper's "Max Grad Norm", applied in
+``on_before_optimizer_step`` where the gradients are unscaled), not
+``trainer.gradient_clip_val``, and the LR schedule advances once per optimizer step;
+``trainer.global_step`` and ``trainer.max_steps`` count optimizer steps.
 
 A subclass builds ``self.model`` (called as ``model(frames, first, *conditions, state)``), says
 which batch entries are its conditions (``condition_keys``: none for C-VPT, the goal for
 C-Steve-1) and calls ``save_hyperparameters`` with lr, weight_decay, betas, warmup_steps,
-cosine_steps, min_lr_ratio, label_smoothing, tbptt_len, update_every, max_grad_norm and
-activation_checkpointing among them. Only parameters with ``requires_grad`` reach the
+cosine_steps, min_lr_ratio, label_smoothing, tbptt_len and max_grad_norm among them. Only parameters with ``requires_grad`` reach the
 optimizer (C-Steve-1 trains LoRA and its conditioning layer alone).
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import Literal
-
 import lightning as L
 import torch
 from torch import nn
 from torch.nn import functional as F
-from torch.utils.checkpoint import checkpoint
 from torchmetrics import MetricCollection
 from torchmetrics.classification import MulticlassAccuracy
 
@@ -60,10 +49,6 @@ def accuracy_metrics(num_actions: int, prefix: str) -> MetricCollection:
     )
 
 
-UpdateEvery = Literal["window", "batch"]
-UPDATE_EVERY: tuple[str, ...] = ("window", "batch")
-
-
 class SequenceBC(L.LightningModule):
     """Cross-entropy on expert actions over TBPTT windows (see the module docstring)."""
 
@@ -73,14 +58,6 @@ class SequenceBC(L.LightningModule):
     def __init__(self) -> None:
         super().__init__()
         self.automatic_optimization = False  # per-window steps: the module steps the optimizer
-
-    def check_update_every(self) -> None:
-        """Refuse an unknown ``update_every`` when the module is built, not at its first step."""
-        if self.hparams.update_every not in UPDATE_EVERY:
-            raise ValueError(
-                f"model.init_args.update_every={self.hparams.update_every!r}: expected one of"
-                f" {UPDATE_EVERY} (window: the paper's one optimizer step per TBPTT window)"
-            )
 
     _weights_ready = True  # False until a subclass given ``init_weights`` has loaded them
 
@@ -113,16 +90,10 @@ class SequenceBC(L.LightningModule):
         self, frames: torch.Tensor, first: torch.Tensor, *conditions: torch.Tensor
     ) -> torch.Tensor:
         """Logits (B, T, num_actions) for whole sequences, window by window from empty memory."""
-        recompute = (
-            self.hparams.activation_checkpointing and self.training and torch.is_grad_enabled()
-        )
         state = self.model.initial_state(frames.shape[0], frames.device)
         window_logits = []
         for _, inputs in self._windows(frames, first, conditions):
-            if recompute:
-                logits, state = checkpoint(self.model, *inputs, state, use_reentrant=False)
-            else:
-                logits, state = self.model(*inputs, state)
+            logits, state = self.model(*inputs, state)
             window_logits.append(logits)
         return torch.cat(window_logits, dim=1)
 
@@ -186,15 +157,8 @@ class SequenceBC(L.LightningModule):
         return torch.cat(window_logits, dim=1), loss_sum / max(counted, 1), done
 
     def training_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> torch.Tensor:
-        actions = batch["actions"]
-        if self.hparams.update_every == "window":
-            logits, loss, done = self._train_per_window(batch)
-            actions = actions[:, :done]
-        else:
-            logits = self.batch_logits(batch)
-            loss = self._loss(logits, actions)
-            self._optimizer_step(loss)
-            logits, loss = logits.detach(), loss.detach()
+        logits, loss, done = self._train_per_window(batch)
+        actions = batch["actions"][:, :done]
         batch_size = actions.shape[0]
         self._log_optimizer_step()
         self.log("train/loss", loss, prog_bar=True, batch_size=batch_size)
@@ -274,4 +238,4 @@ class SequenceBC(L.LightningModule):
         }
 
 
-__all__ = ["IGNORE_ACTION", "UPDATE_EVERY", "SequenceBC", "UpdateEvery", "accuracy_metrics"]
+__all__ = ["IGNORE_ACTION", "SequenceBC", "accuracy_metrics"]

@@ -55,7 +55,7 @@ def test_learns_to_follow_the_goal_with_only_lora_and_conditioning(tmp_path: Pat
     backbone = _backbone_export(tmp_path)
     module = CSteve1(
         backbone=str(backbone), goal_dim=GOAL_DIM, lora_rank=4, lr=3e-2, tbptt_len=4,
-        cosine_steps=1000, activation_checkpointing=False,
+        cosine_steps=1000,
     )
     module.configure_model()
     base = {n: p.detach().clone() for n, p in module.model.named_parameters() if not p.requires_grad}
@@ -75,7 +75,7 @@ def test_learns_to_follow_the_goal_with_only_lora_and_conditioning(tmp_path: Pat
 def test_validation_reports_what_the_goal_is_worth(tmp_path: Path) -> None:
     module = CSteve1(
         backbone=str(_backbone_export(tmp_path)), goal_dim=GOAL_DIM, lora_rank=2, lr=3e-2,
-        tbptt_len=4, cosine_steps=1000, activation_checkpointing=False,
+        tbptt_len=4, cosine_steps=1000,
     )
     batch = _goal_batch()
     trainer = _trainer(40, tmp_path)
@@ -130,8 +130,7 @@ def test_init_weights_starts_a_new_run_from_a_finished_one(tmp_path: Path) -> No
     """A DAgger round: the last round's network, a fresh optimizer; the new run reloads
     without the file it started from, and another architecture is refused by name."""
     backbone = _backbone_export(tmp_path)
-    settings = dict(backbone=str(backbone), goal_dim=GOAL_DIM, lora_rank=2, tbptt_len=4,
-                    activation_checkpointing=False)
+    settings = dict(backbone=str(backbone), goal_dim=GOAL_DIM, lora_rank=2, tbptt_len=4)
     first = CSteve1(**settings, lr=3e-2, cosine_steps=100)
     batch = _goal_batch()
     trainer = _trainer(20, tmp_path)

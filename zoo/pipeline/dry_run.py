@@ -9,7 +9,7 @@ no DDP), the length (2 optimizer steps, then one short validation before the run
 checkpoint the next stage reads is written), the per-device batch, the loggers (CSV: no W&B)
 and the data split fractions the few episodes need. What they keep: every model config's
 sizes (C-VPT base, ViT-B/16 towers, LoRA, the prior's widths), ``seq_len`` 640 with TBPTT
-windows of 64, ``update_every``, precision, the callbacks (C-VPT's online evaluation plays once,
+windows of 64 (one optimizer step each), precision, the callbacks (C-VPT's online evaluation plays once,
 1 episode of 16 steps). C-CLIP starts from a random-init open_clip ViT-B-16 state dict written
 to ``DIR/clip_init`` (this project never downloads weights), so it goes through the
 pretrained-weights loader (224-px position grid resized to 9x9, strict key match). A ``scale``
