@@ -1,4 +1,5 @@
-"""argparse value types shared by the ``zoo`` subcommands, so every bad number reads alike."""
+"""argparse value types shared by the ``zoo`` subcommands, so every bad number reads alike, and
+the ``--out`` folder flag they share."""
 
 from __future__ import annotations
 
@@ -40,6 +41,13 @@ def out_dir(text: str) -> Path:
     if path.exists() and not path.is_dir():
         raise argparse.ArgumentTypeError(f"{text} exists and is not a folder")
     return path
+
+
+def add_out_flag(parser: argparse.ArgumentParser, what: str, default: str | None = None) -> None:
+    """``--out``, the folder a command writes (``out_dir``: made if missing, a file refused);
+    required unless ``default`` says where it goes without one."""
+    parser.add_argument("--out", type=out_dir, required=default is None, metavar="DIR",
+                        help=what if default is None else f"{what} (default {default})")
 
 
 def shard_range(text: str) -> tuple[int, int]:

@@ -14,6 +14,7 @@ import urllib.request
 
 import yaml
 
+from zoo.argtypes import add_out_flag
 from zoo.captions.balance import BALANCE_MODES, BALANCE_UNITS, DEFAULT_BALANCE_UNIT
 from zoo.captions.vocabulary import load_vocabulary
 
@@ -187,7 +188,7 @@ def register_data_commands(data_subparsers: argparse._SubParsersAction) -> None:
         "caption", help="CrafterPlay shards -> category-balanced CrafterCaption shards"
     )
     cap.add_argument("--src", required=True, help="CrafterPlay folder (with manifest.json)")
-    cap.add_argument("--out", required=True, help="output folder for the caption shards")
+    add_out_flag(cap, "output folder for the caption shards")
     cap.add_argument("--seed", type=int, default=0, help="seeds the held-out split and balancing")
     cap.add_argument("--balance", choices=BALANCE_MODES, default="uniform",
                      help="uniform: same number of clips per --balance-unit (paper); "

@@ -11,8 +11,11 @@ from pathlib import Path
 
 from zoo.agents import AGENT_NAMES, AgentSpec
 from zoo.agents.spec import add_agent_flags
-from zoo.argtypes import existing_dir, out_dir, positive_int, shard_range
-from zoo.envs import ENV_NAMES
+from zoo.argtypes import add_out_flag, existing_dir, positive_int, shard_range
+from zoo.envs.flags import (
+    REQUIRED, add_episodes_flag, add_game_flag, add_max_steps_flag, add_num_envs_flag,
+    add_seed_flag,
+)
 from zoo.envs.tasks.starts import START_STATES
 
 
@@ -58,14 +61,7 @@ def register(subparsers) -> None:
                      metavar="KEY=VALUE",
                      help="override a scripted-expert tunable (zoo/experts/scripted/config.py), "
                      "e.g. plants_first=true; repeatable; recorded in the manifest")
-    gen.add_argument("--instructions", metavar="captions|subgoals|FILE",
-                     help="goal-directed play: tell the scripted expert one caption after another, "
-                     "drawn from captions (all it follows), subgoals (the task suites' sub-goals) "
-                     "or FILE (one caption per line, or 'caption | weight' to draw it more "
-                     "often); every step records its caption id")
-    gen.add_argument("--instruction-timeout", type=positive_int, default=300, metavar="N",
-                     help="actions spent on an instruction before the next is drawn "
-                     "(with --instructions)")
+    _add_instruction_args(gen)
     gen.add_argument("--start-states", choices=START_STATES, default="default",
                      help="default: the game's start; tasks: each episode starts with one of the "
                      "task suites' starting inventories (drawn from its seed)")
@@ -92,11 +88,7 @@ def register(subparsers) -> None:
     dagger.add_argument("--mix", choices=("episode", "step"), default="episode",
                         help="one beta draw per episode or per step")
     dagger.add_argument("--round", type=int, default=1, help="DAgger round, for the manifest")
-    dagger.add_argument("--instructions", metavar="captions|subgoals|FILE",
-                        help="goal-directed DAgger: the scripted expert follows this schedule "
-                        "(as in `generate`) and a C-Steve-1 learner is told the same instruction")
-    dagger.add_argument("--instruction-timeout", type=positive_int, default=300, metavar="N",
-                        help="actions spent on an instruction before the next is drawn")
+    _add_instruction_args(dagger, learner=True)
     _add_play_args(dagger)
     dagger.set_defaults(handler=_dagger, _parser=dagger)
 
@@ -108,7 +100,7 @@ def register(subparsers) -> None:
         "appear twice; checks every shard's sha256; says which shards no folder has yet.",
     )
     merge.add_argument("src", nargs="+", type=existing_dir, help="shard-range folders")
-    merge.add_argument("--out", required=True, type=out_dir, help="the merged dataset folder")
+    add_out_flag(merge, "the merged dataset folder")
     merge.set_defaults(handler=_merge)
 
     info = data_sub.add_parser("info", help="counts, noop ratios, unlock rates; verify sha256")
@@ -122,19 +114,30 @@ def register(subparsers) -> None:
         importlib.import_module("zoo.captions.cli").register_data_commands(data_sub)
 
 
+def _add_instruction_args(parser: argparse.ArgumentParser, learner: bool = False) -> None:
+    """``--instructions`` and its timeout, shared by `generate` and `dagger`."""
+    told = " (a C-Steve-1 learner is told the same instruction)" if learner else ""
+    parser.add_argument("--instructions", metavar="captions|subgoals|FILE",
+                        help="goal-directed play: tell the scripted expert one caption after "
+                        "another, drawn from captions (all it follows), subgoals (the task "
+                        "suites' sub-goals) or FILE (one caption per line, or 'caption | weight' "
+                        f"to draw it more often); every step records its caption id{told}")
+    parser.add_argument("--instruction-timeout", type=positive_int, default=300, metavar="N",
+                        help="actions spent on an instruction before the next is drawn "
+                        "(with --instructions)")
+
+
 def _add_play_args(parser: argparse.ArgumentParser) -> None:
     """Arguments shared by `generate` and `dagger`: how many episodes, where, how."""
-    parser.add_argument("--episodes", required=True, type=positive_int)
-    parser.add_argument("--seed", required=True, type=int)
-    parser.add_argument("--out", required=True, type=out_dir, help="dataset folder")
+    add_episodes_flag(parser, default=REQUIRED)
+    add_seed_flag(parser, default=REQUIRED)
+    add_out_flag(parser, "dataset folder")
     parser.add_argument("--workers", type=positive_int, default=1, help="shard processes")
-    parser.add_argument("--env", choices=ENV_NAMES, default="craftax")
+    add_game_flag(parser, default="craftax")
     parser.add_argument("--episodes-per-shard", type=positive_int, default=16)
     parser.add_argument("--chunk-length", type=positive_int, default=256, help="steps per sample")
-    parser.add_argument("--max-steps", type=positive_int, default=10_000,
-                        help="episode step limit")
-    parser.add_argument("--num-envs", type=positive_int, default=8,
-                        help="episodes played at once")
+    add_max_steps_flag(parser, default=10_000)
+    add_num_envs_flag(parser, default=8)
     parser.add_argument("--frames", choices=("stored", "rendered"), default="stored",
                         help="stored: frames as images; rendered (--env craftax only): residuals "
                         "against re-renders from the stored state, far fewer bytes, "

@@ -13,8 +13,10 @@ from pathlib import Path
 
 from zoo.agents import AgentSpec
 from zoo.agents.spec import add_agent_flags
-from zoo.argtypes import existing_dir, non_negative_int, out_dir, positive_int
-from zoo.envs import ENV_NAMES
+from zoo.argtypes import add_out_flag, existing_dir, non_negative_int, positive_int
+from zoo.envs.flags import (
+    add_episodes_flag, add_game_flag, add_max_steps_flag, add_num_envs_flag, add_seed_flag,
+)
 from zoo.envs.tasks import SINGLE_STEP_TASKS, TASKS
 from zoo.eval.play import inference_meta
 from zoo.eval.csteve1_tables import STEVE_ROWS, TABLE_ROWS
@@ -66,20 +68,13 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_agent_flags(p)
-    p.add_argument("--env", choices=ENV_NAMES, required=True, help="game to play in")
-    p.add_argument("--episodes", type=positive_int, default=100, help="episodes (default 100)")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="run seed (default 0)")
-    p.add_argument(
-        "--out", type=Path,
-        help="output directory (default runs/eval/<agent>-<env>-<UTC time>)",
-    )
-    p.add_argument(
-        "--num-envs", type=positive_int, default=8, help="envs played at once (default 8)"
-    )
-    p.add_argument(
-        "--max-steps", type=positive_int,
-        help="episode step limit (default 10000; with --task the task's: 500 single-step, 1000 T1-T4)",
-    )
+    add_game_flag(p)
+    add_episodes_flag(p)
+    add_seed_flag(p)
+    add_out_flag(p, "output folder", default="runs/eval/<agent>-<env>-<UTC time>")
+    add_num_envs_flag(p, default=8)
+    add_max_steps_flag(p, default=None, what="episode step limit (default 10000; with --task the "
+                       "task's: 500 single-step, 1000 T1-T4)")
     p.add_argument("--no-gif", action="store_true", help="skip episode.gif")
     p.add_argument("--overwrite", action="store_true", help="replace a report already in --out")
     p.add_argument(
@@ -103,7 +98,7 @@ def register(subparsers) -> None:
     protocols = tables.add_subparsers(dest="protocol", metavar="TABLE", required=True)
     for name, (mode, line) in PROTOCOLS.items():
         sub = protocols.add_parser(name, help=line, description=_protocol_description(mode, line))
-        sub.add_argument("--out", type=out_dir, required=True, help="folder of all reports")
+        add_out_flag(sub, "folder of all reports")
         sub.set_defaults(handler=run_protocol)
         ADD_PROTOCOL_ARGS[name](sub)
     _register_instruction_matrix(protocols)
@@ -139,13 +134,10 @@ def _add_play_args(p: argparse.ArgumentParser, steve_required: bool) -> None:
 def _add_episode_args(p: argparse.ArgumentParser, temperature: bool = True) -> None:
     """The games and the episodes every row or cell plays (and the temperature, unless the
     agent flags declare it)."""
-    p.add_argument("--env", nargs="+", choices=ENV_NAMES, default=list(ENV_NAMES), metavar="GAME",
-                   help=f"games: {', '.join(ENV_NAMES)} (default: both)")
-    p.add_argument("--episodes", type=positive_int, default=100, help="per cell (default 100)")
-    p.add_argument("--seed", type=non_negative_int, default=0,
-                   help="episode j of every cell is seeded from (seed, j) (default 0)")
-    p.add_argument("--num-envs", type=positive_int, default=20,
-                   help="envs played at once (default 20)")
+    add_game_flag(p, many=True)
+    add_episodes_flag(p, what="episodes per cell")
+    add_seed_flag(p)
+    add_num_envs_flag(p, default=20)
     if temperature:
         p.add_argument("--temperature", type=float,
                        help="C-VPT and C-Steve-1 sample from softmax(logits / T) (default 1, or "
@@ -190,8 +182,7 @@ ADD_PROTOCOL_ARGS = {
 
 
 def _check_out(out: Path, overwrite: bool) -> None:
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"--out {out} is an existing file; give a directory")
+    """A report already in ``out`` is kept unless told (argparse refused a file as ``out``)."""
     if (out / "report.json").exists() and not overwrite:
         raise UsageError(f"--out {out} already holds report.json; pass --overwrite to replace it")
 
@@ -401,10 +392,10 @@ def _register_instruction_matrix(protocols) -> None:
     add_agent_flags(p, agent="who plays (scripted: goal-directed; default: the agent "
                     "--checkpoint holds)", checkpoint="a trained agent, e.g. a C-Steve-1 export")
     _add_episode_args(p, temperature=False)
-    p.add_argument("--max-steps", type=positive_int, default=200, help="L: steps per episode (200)")
+    add_max_steps_flag(p, default=200, what="L: steps per episode")
     p.add_argument("--horizons", type=positive_int, nargs="+", default=[], help=matrix.HORIZONS)
     p.add_argument("--instructions", nargs="+", help="some of the default instructions only")
-    p.add_argument("--out", type=out_dir, required=True, help="folder of the rows and report")
+    add_out_flag(p, "folder of the rows and report")
     p.set_defaults(handler=run_instruction_matrix)
 
 

@@ -11,13 +11,14 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 
 import numpy as np
 
 from zoo.agents.spec import add_agent_flags
+from zoo.argtypes import add_out_flag
 from zoo.envs.base import episode_seed
 from zoo.envs.constants import ACHIEVEMENT_NAMES, ACTION_NAMES
+from zoo.envs.flags import add_game_flag, add_max_steps_flag, add_seed_flag
 
 CAPTION_BAR = 14  # pixels of the text bar above each (upscaled) frame
 
@@ -109,10 +110,10 @@ def register(subparsers) -> None:
         help='e.g. "obtain wood" (a caption or free text); repeat it to play each on the same '
         "world, side by side in one GIF",
     )
-    p.add_argument("--env", choices=("craftax", "crafter"), default="craftax")
-    p.add_argument("--seed", type=int, default=0, help="episode seed (episode 0 of this seed)")
-    p.add_argument("--max-steps", type=int, default=500)
-    p.add_argument("--out", type=Path, required=True)
+    add_game_flag(p, default="craftax")
+    add_seed_flag(p)  # plays episode 0 of the seed
+    add_max_steps_flag(p, default=500)
+    add_out_flag(p, "folder of play.gif and play.json")
     p.set_defaults(handler=run_play)
 
 

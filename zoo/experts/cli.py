@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from zoo.argtypes import add_out_flag
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     expert = subparsers.add_parser("expert", help="train the PPO-RNN expert (Craftax, JAX)")
@@ -21,7 +23,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument(
         "--config", required=True, help="YAML with every PPOConfig field (configs/expert_ppo.yaml)"
     )
-    train.add_argument("--out", help="run directory (default: runs/expert_ppo/<config name>)")
+    add_out_flag(train, "run folder", default="runs/expert_ppo/<config name>")
     train.add_argument(
         "--total-timesteps", type=lambda s: int(float(s)), help="override total_timesteps (1e9 ok)"
     )

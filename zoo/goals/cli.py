@@ -7,7 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from zoo.argtypes import existing_dir, out_dir, positive_int, shard_range
+from zoo.argtypes import add_out_flag, existing_dir, positive_int, shard_range
 
 
 def register(subparsers) -> None:
@@ -91,7 +91,7 @@ def _register_embed(goals_sub) -> None:
     )
     embed.add_argument("--checkpoint", required=True, help="C-CLIP Lightning checkpoint (.ckpt)")
     embed.add_argument("--src", required=True, type=existing_dir, help="CrafterPlay folder")
-    embed.add_argument("--out", required=True, type=out_dir, help="embedding folder")
+    add_out_flag(embed, "embedding folder")
     embed.add_argument("--batch-size", type=positive_int, default=240,
                        help="frames per image-tower pass (whole groups of 6)")
     embed.add_argument("--device", default="cpu")

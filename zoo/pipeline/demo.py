@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from zoo.argtypes import positive_int
+from zoo.envs.flags import add_episodes_flag, add_game_flag, add_max_steps_flag, add_seed_flag
 
 
 def register(subparsers) -> None:
@@ -21,10 +21,10 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--out", type=Path, default=Path("runs/demo"), help="output folder")
-    p.add_argument("--env", choices=("craftax", "crafter"), default="craftax", help="game")
-    p.add_argument("--episodes", type=positive_int, default=4, help="episodes to generate/score")
-    p.add_argument("--max-steps", type=positive_int, default=1000, help="episode step limit")
-    p.add_argument("--seed", type=int, default=0, help="seed of the data and the evaluation")
+    add_game_flag(p, default="craftax")
+    add_episodes_flag(p, default=4, what="episodes to generate and score")
+    add_max_steps_flag(p, default=1000)
+    add_seed_flag(p)  # the data's and the evaluation's
     p.set_defaults(handler=run_demo)
 
 

@@ -8,6 +8,8 @@ import json
 import sys
 from pathlib import Path
 
+from zoo.argtypes import add_out_flag
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     rl = subparsers.add_parser(
@@ -24,7 +26,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
     )
     train.add_argument("--config", required=True, help="YAML with every RLConfig field")
-    train.add_argument("--out", help="run directory (default: runs/rl/<config name>/seed<S>)")
+    add_out_flag(train, "run folder", default="runs/rl/<config name>/seed<S>")
     train.add_argument("--seed", type=int, help="override seed")
     train.add_argument(
         "--total-env-steps", type=lambda s: int(float(s)), help="override total_env_steps"

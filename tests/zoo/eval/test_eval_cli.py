@@ -54,8 +54,11 @@ def test_bad_arguments_are_rejected_by_the_parser(tmp_path, capsys, change, mess
 
 def test_out_may_not_be_a_file(tmp_path, capsys):
     (tmp_path / "file").write_text("x")
-    assert main(eval_args(tmp_path / "file")) == 2
-    assert "is an existing file; give a directory" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stop:
+        main(eval_args(tmp_path / "file"))
+    assert stop.value.code == 2
+    assert "argument --out: " in (err := capsys.readouterr().err)
+    assert "file exists and is not a folder" in err
 
 
 def test_ppo_needs_a_checkpoint(tmp_path, capsys):
