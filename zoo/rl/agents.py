@@ -22,7 +22,7 @@ def build_pixel_policy(config: RLConfig) -> nn.Module:
     if config.agent == "cvpt_rl":
         from zoo.weights import load_model
 
-        model = load_model(config.checkpoint, "cvpt")
+        model = load_model(config.pretrained().checkpoint, "cvpt")
         return CVPTRLPolicy(model, config.lora_rank, config.lora_alpha).to(config.device)
     raise ValueError(
         f"agent {config.agent!r} does not act on pixels alone (PPO-Steve's planner acts through "
@@ -48,9 +48,11 @@ def load_executor(config: RLConfig):
     from zoo.agents.csteve1_agent import GoalEncoder, CSteve1Policy
     from zoo.captions.vocabulary import load_vocabulary
 
-    steve = CSteve1Policy.load(config.checkpoint, config.device, cfg_scale=config.cfg_scale,
-                             cclip=config.cclip, prior=config.prior)
-    models = steve.goal_model_paths()  # the config's, else the ones its export records
+    spec = config.pretrained()
+    spec.require_text()  # the config's goal models, else the ones its export records
+    steve = CSteve1Policy.load(spec.checkpoint, config.device, cfg_scale=spec.cfg_scale,
+                               cclip=spec.cclip, prior=spec.prior)
+    models = steve.goal_model_paths()
     encoder = GoalEncoder.load(models["cclip"], models["prior"], sample_prior=False)
     return steve, encoder.from_caption_ids(list(range(len(load_vocabulary().texts()))))
 

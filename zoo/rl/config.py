@@ -8,10 +8,15 @@ defaults unless noted; the paper gives only C-VPT-RL's LoRA (alpha 16, r 16) and
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from zoo.strict_config import StrictConfig
 
+if TYPE_CHECKING:
+    from zoo.agents import AgentSpec
+
 AGENTS = ("ppo_rnn", "cvpt_rl", "ppo_steve")
+PRETRAINED = {"cvpt_rl": "cvpt", "ppo_steve": "csteve1"}  # the AgentSpec kind each starts from
 
 
 @dataclass(frozen=True)
@@ -107,9 +112,17 @@ class RLConfig(StrictConfig):
         missing = [k for k in needs.get(self.agent, ()) if getattr(self, k) is None]
         if missing:
             raise ValueError(f"RLConfig: agent {self.agent!r} needs {missing} set")
-        if (self.cclip is None) != (self.prior is None):
-            raise ValueError("RLConfig: set cclip and prior together (or neither: the ones the "
-                             "C-Steve-1 export records)")
+
+    def pretrained(self) -> AgentSpec:
+        """The pretrained agent a run starts from (C-VPT-RL: the C-VPT it fine-tunes; PPO-Steve:
+        the C-Steve-1 it plans over), described as ``zoo eval`` describes it, so its files and
+        goal models pass the same checks (cclip and prior given together, or the export's)."""
+        from zoo.agents import AgentSpec
+
+        if self.agent not in PRETRAINED:
+            raise ValueError(f"RLConfig.agent={self.agent!r} starts from no pretrained agent")
+        return AgentSpec(PRETRAINED[self.agent], self.checkpoint, cfg_scale=self.cfg_scale,
+                         cclip=self.cclip, prior=self.prior)
 
     @property
     def env_steps_per_update(self) -> int:

@@ -39,10 +39,20 @@ def test_bad_values_name_the_field():
     with pytest.raises(ValueError, match=r"needs \['checkpoint'\]"):
         RLConfig.from_dict(base | {"agent": "ppo_steve", "checkpoint": None, "cclip": None,
                                    "prior": None})
-    with pytest.raises(ValueError, match="set cclip and prior together"):
-        RLConfig.from_dict(base | {"agent": "ppo_steve", "checkpoint": "c", "cclip": "x",
-                                   "prior": None})
     with pytest.raises(ValueError, match="cpu only"):
         RLConfig.from_dict(base | {"device": "cuda"})
     with pytest.raises(ValueError, match="lr must be float"):
         RLConfig.from_dict(base | {"lr": "fast"})
+
+
+def test_the_pretrained_agent_is_checked_as_zoo_eval_checks_it():
+    """PPO-Steve's C-Steve-1 is an ``AgentSpec``: its goal models come as a pair or from the
+    export, with ``zoo eval``'s messages."""
+    steve = str(ROOT / "weights" / "csteve1_cpu")
+    base = RLConfig.from_yaml(CONFIGS[0]).to_dict() | {"agent": "ppo_steve", "checkpoint": steve}
+    spec = RLConfig.from_dict(base).pretrained()
+    assert (spec.kind, spec.checkpoint) == ("csteve1", steve)
+    with pytest.raises(ValueError, match="give --cclip and --prior together"):
+        RLConfig.from_dict(base | {"cclip": str(ROOT / "weights" / "cclip_cpu")}).pretrained()
+    with pytest.raises(ValueError, match="starts from no pretrained agent"):
+        RLConfig.from_dict(base | {"agent": "ppo_rnn"}).pretrained()
