@@ -54,3 +54,15 @@ def test_a_mutant_without_its_tests_names_the_file(tmp_path: Path) -> None:
     path.write_text('[[mutation]]\nname = "n"\nfile = "f"\nold = "a"\nnew = "b"\nwhy = "w"\n')
     with pytest.raises(ValueError, match=r"bad.toml: mutation 0 lacks \['tests'\]"):
         mutations.load([path])
+
+
+def test_every_mutant_still_matches_the_source() -> None:
+    """Each mutant's ``old`` text is in its file exactly once, so a refactor that moves the code
+    shows up here, not as a stale row the next time someone runs the whole table."""
+    gone = {}
+    for m in mutations.load(sorted(mutations.MUTANTS.glob("*.toml"))):
+        path = ROOT / m.file
+        found = path.read_text().count(m.old) if path.exists() else 0
+        if found != 1:
+            gone[m.name] = (m.file, found)
+    assert not gone, f"mutants whose source changed (update bench/mutants): {gone}"
