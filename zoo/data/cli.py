@@ -182,7 +182,7 @@ def _generate(args) -> int:
         expert=args.expert, checkpoint=checkpoint, episodes=args.episodes, seed=args.seed,
         env=args.env, episodes_per_shard=args.episodes_per_shard,
         chunk_length=args.chunk_length, max_steps=args.max_steps, frames=args.frames,
-        expert_options=dict(args.expert_option) or None, instructions=_schedule(args),
+        expert_options=dict(args.expert_option), instructions=_schedule(args),
         start_states=args.start_states,
     )
     return _run_generation(config, args, "generate")

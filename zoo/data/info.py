@@ -74,7 +74,7 @@ def dataset_info(root: str | Path, skip_corrupt: bool = False) -> dict:
         "root": str(root),
         "ok": not check.bad or skip_corrupt,
         "config": manifest["config"],
-        "frames_mode": manifest["config"].get("frames") or "stored",
+        "frames_mode": manifest["config"]["frames"],
         "renderers": sorted({e["renderer"] for e in shards if "renderer" in e}),
         "shards": len(shards),
         "bad_shards": [{"file": f, "why": why} for f, why in check.bad],

@@ -17,11 +17,8 @@ from zoo.files import atomic_write_text
 
 MANIFEST = "manifest.json"
 FORMAT = "crafterplay"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 VERSIONED_PACKAGES = ("crafter-zoo", "crafter", "craftax", "jax", "numpy", "zstandard")
-ADDED_CONFIG_KEYS = ("instructions", "start_states")
-"""``config`` fields newer than some manifests, read as None (their default) where one lacks
-them, so an old folder's config reads as this zoo writes it."""
 
 
 class DatasetMismatchError(RuntimeError):
@@ -62,15 +59,28 @@ def load_manifest(root: str | Path) -> dict | None:
         raise ValueError(f"{path}: not valid JSON ({err})") from err
     if manifest.get("format") != FORMAT or "shards" not in manifest:
         raise ValueError(f"{path}: not a CrafterPlay manifest (expected format {FORMAT!r})")
+    if manifest.get("format_version") == 1:
+        _upgrade_from_version_1(manifest)
     if manifest.get("format_version") != FORMAT_VERSION:
         raise ValueError(
             f"{path}: CrafterPlay format version {manifest.get('format_version')!r}, this zoo "
-            f"reads version {FORMAT_VERSION}; regenerate the data with this version"
+            f"reads versions 1 and {FORMAT_VERSION}; regenerate the data with this version"
         )
-    if "config" in manifest:
-        for key in ADDED_CONFIG_KEYS:
-            manifest["config"].setdefault(key, None)
     return manifest
+
+
+def _upgrade_from_version_1(manifest: dict) -> None:
+    """Read a version-1 manifest as version 2 writes it. Its shards are the same bytes; its
+    ``config`` spelled three defaults as null (frames "stored", start_states "default",
+    expert_options {}) and may lack the fields added during version 1 (instructions,
+    start_states). A resumed generation saves it back as version 2."""
+    config = manifest.get("config", {})
+    defaults = {"frames": "stored", "start_states": "default", "expert_options": {}}
+    for key, value in defaults.items():
+        if config.get(key) is None:
+            config[key] = value
+    config.setdefault("instructions", None)
+    manifest["format_version"] = FORMAT_VERSION
 
 
 def require_manifest(root: str | Path) -> dict:

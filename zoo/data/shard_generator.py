@@ -87,18 +87,17 @@ class GenerationConfig:
         min_noop_run: filter threshold used for the noop statistics in the manifest.
         zstd_level: zstd level for frames and arrays.
         zstd_window_log: zstd window (log2 bytes).
-        frames: None (or "stored"): frames coded as images; "rendered" (Craftax only): each
-            frame as its residual against a re-render from the stored state, ~1/100 of the
-            bytes for a re-render at decoding (``zoo.data.rerender``). None, not "stored",
-            is kept so manifests written before this field compare equal.
+        frames: "stored": frames coded as images; "rendered" (Craftax only): each frame as
+            its residual against a re-render from the stored state, ~1/100 of the bytes for a
+            re-render at decoding (``zoo.data.rerender``).
         expert_options: overrides of the scripted expert's ``ExpertConfig`` fields (e.g.
-            ``{"plants_first": True}``); None: its defaults (and older manifests compare equal).
+            ``{"plants_first": True}``); empty: its defaults.
         dagger: DAgger rollouts, the expert labelling a learner's play; None: the expert plays.
             A dict (as read back from a manifest) becomes ``DaggerSettings``.
         instructions: the schedule of captions the scripted expert is told one after another
             (``zoo.experts.scripted.schedule``), each step recording the one it pursued; None:
             normal play. With ``dagger`` a C-Steve-1 learner is told the same instructions. A dict (as read back from a manifest) becomes ``InstructionSchedule``.
-        start_states: None (or "default"): the game's own start; "tasks": each episode starts
+        start_states: "default": the game's own start; "tasks": each episode starts
             with one of the task suites' starting inventories (``zoo.envs.tasks.starts``).
     """
 
@@ -113,22 +112,18 @@ class GenerationConfig:
     min_noop_run: int = 20
     zstd_level: int = 2
     zstd_window_log: int = 25
-    frames: str | None = None
-    expert_options: dict | None = field(default=None, hash=False)  # a dict: keep hash() working
+    frames: str = "stored"
+    expert_options: dict = field(default_factory=dict, hash=False)  # a dict: keep hash() working
     dagger: DaggerSettings | None = None
     instructions: InstructionSchedule | None = None
-    start_states: str | None = None
+    start_states: str = "default"
 
     def __post_init__(self) -> None:
-        if self.expert_options == {}:
-            object.__setattr__(self, "expert_options", None)  # one spelling of "defaults"
-        if self.expert_options is not None and self.expert != "scripted":
+        if self.expert_options and self.expert != "scripted":
             raise ValueError(
                 f"expert_options apply to the scripted expert only, got expert={self.expert!r}"
             )
-        if self.frames == "stored":
-            object.__setattr__(self, "frames", None)  # frozen; one spelling in the manifest
-        if self.frames not in (None, "rendered"):
+        if self.frames not in ("stored", "rendered"):
             raise ValueError(f"frames must be 'stored' or 'rendered', got {self.frames!r}")
         if self.frames == "rendered" and self.env != "craftax":
             raise ValueError(
@@ -144,9 +139,7 @@ class GenerationConfig:
                 "an instruction schedule is followed by the scripted expert (alone, or labelling"
                 f" a learner told the same instructions), got expert={self.expert!r}"
             )
-        if self.start_states == "default":
-            object.__setattr__(self, "start_states", None)  # one spelling of the game's start
-        if self.start_states not in (None, *START_STATES):
+        if self.start_states not in START_STATES:
             raise ValueError(
                 f"start_states must be one of {START_STATES}, got {self.start_states!r}"
             )

@@ -184,11 +184,11 @@ def test_stored_shards_are_the_same_bytes_whoever_draws_the_frames(
 @pytest.mark.parametrize(
     ("env", "frames", "renderer", "needs_pixels", "drawn"),
     [
-        ("craftax", None, "numba", False, False),  # drawn on the encoder, from the states
-        ("craftax", None, "jax", False, True),  # inside the env's jitted step
+        ("craftax", "stored", "numba", False, False),  # drawn on the encoder, from the states
+        ("craftax", "stored", "jax", False, True),  # inside the env's jitted step
         ("craftax", "rendered", "jax", False, False),  # the re-render that codes a chunk
-        ("craftax", None, "numba", True, True),  # the agent looks at them
-        ("crafter", None, "numba", False, True),  # not a function of the exported state
+        ("craftax", "stored", "numba", True, True),  # the agent looks at them
+        ("crafter", "stored", "numba", False, True),  # not a function of the exported state
     ],
 )
 def test_who_draws_the_frames(env, frames, renderer, needs_pixels, drawn, monkeypatch):

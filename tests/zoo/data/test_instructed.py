@@ -137,8 +137,8 @@ def test_a_resume_refuses_another_schedule_and_accepts_the_same(instructed, tmp_
     with pytest.raises(DatasetMismatchError, match=r"instructions: \{.*\} there vs None now"):
         generate(dataclasses.replace(INSTRUCTED, instructions=None), root, progress=False,
                  build_agent=dataset_agent)
-    with pytest.raises(DatasetMismatchError, match="start_states: 'tasks' there vs None now"):
-        generate(dataclasses.replace(INSTRUCTED, start_states=None), root, progress=False,
+    with pytest.raises(DatasetMismatchError, match="start_states: 'tasks' there vs 'default' now"):
+        generate(dataclasses.replace(INSTRUCTED, start_states="default"), root, progress=False,
                  build_agent=dataset_agent)
     generate(INSTRUCTED, root, progress=False, build_agent=dataset_agent)  # resumes: all done
     assert _shas(root) == _shas(instructed)
@@ -177,7 +177,7 @@ def test_a_schedule_needs_the_scripted_expert() -> None:
     assert dataclasses.replace(INSTRUCTED, dagger=dagger).dagger == dagger  # goal-directed DAgger
     with pytest.raises(ValueError, match="start_states must be one of"):
         dataclasses.replace(INSTRUCTED, start_states="anywhere")
-    assert dataclasses.replace(INSTRUCTED, start_states="default").start_states is None
+    assert dataclasses.replace(INSTRUCTED, start_states="default").start_states == "default"
     stored = json.loads(json.dumps(dataclasses.asdict(INSTRUCTED)))
     assert GenerationConfig(**stored) == INSTRUCTED and hash(GenerationConfig(**stored))
 

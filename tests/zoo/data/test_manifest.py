@@ -1,5 +1,6 @@
 """The manifest's ``config``: DAgger settings nested, the learner as its ``AgentSpec`` record
-(kind, files and sha256s), and a resume that refuses other settings key by key."""
+(kind, files and sha256s), a resume that refuses other settings key by key, and version-1
+manifests read as version 2 writes them."""
 
 from __future__ import annotations
 
@@ -26,9 +27,10 @@ DAGGER = GenerationConfig(
 EXPERT = GenerationConfig(expert="random", episodes=1, seed=3, env="crafter", max_steps=20)
 
 
-def _read_back(tmp_path, config: dict) -> dict:
+def _read_back(tmp_path, config: dict, version: int = 2) -> dict:
     """``config`` written into a manifest and read back by ``load_manifest``."""
-    manifest = {"format": "crafterplay", "format_version": 1, "config": config, "shards": []}
+    manifest = {"format": "crafterplay", "format_version": version, "config": config,
+                "shards": []}
     (tmp_path / "manifest.json").write_text(json.dumps(manifest))
     return load_manifest(tmp_path)
 
@@ -64,9 +66,30 @@ def test_a_dagger_manifest_refuses_other_settings_other_weights_and_expert_play(
         check_same_config(manifest, dataclasses.asdict(expert), tmp_path)
 
 
-def test_a_manifest_from_before_dagger_compares_equal(tmp_path) -> None:
-    manifest = _read_back(tmp_path, {**COMMON, "expert": "random"})
+def test_a_version_1_manifest_reads_with_this_versions_spellings(tmp_path) -> None:
+    """Version 1 wrote the defaults of frames, start_states and expert_options as null and
+    predates the dagger, instructions and start_states fields: it resumes as the same data."""
+    manifest = _read_back(tmp_path, {**COMMON, "expert": "random"}, version=1)
+    assert manifest["format_version"] == 2
+    assert manifest["config"]["frames"] == "stored"
+    assert manifest["config"]["start_states"] == "default"
+    assert manifest["config"]["expert_options"] == {}
     assert config_diff(manifest["config"], dataclasses.asdict(EXPERT)) == ""
+    check_same_config(manifest, dataclasses.asdict(EXPERT), tmp_path)  # resumes: no error
+
+
+def test_a_manifest_of_an_unknown_version_is_refused_by_name(tmp_path) -> None:
+    with pytest.raises(ValueError, match=r"manifest.json: CrafterPlay format version 3, this "
+                                         r"zoo reads versions 1 and 2"):
+        _read_back(tmp_path, dataclasses.asdict(EXPERT), version=3)
+
+
+def test_the_defaults_have_one_spelling() -> None:
+    stored = dataclasses.asdict(EXPERT)
+    assert (stored["frames"], stored["start_states"], stored["expert_options"]) == (
+        "stored", "default", {})
+    with pytest.raises(ValueError, match="frames must be 'stored' or 'rendered', got None"):
+        GenerationConfig(expert="random", episodes=1, seed=3, frames=None)
 
 
 def test_dagger_settings_need_a_learner_record() -> None:
