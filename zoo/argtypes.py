@@ -1,5 +1,6 @@
 """argparse value types shared by the ``zoo`` subcommands, so every bad number reads alike, and
-the ``--out`` folder flag they share."""
+the flags they share that are not about agents or episodes: ``--out``, ``--no-progress``,
+``--wandb`` and a config-driven trainer's ``--seed`` / ``--resume``."""
 
 from __future__ import annotations
 
@@ -48,6 +49,26 @@ def add_out_flag(parser: argparse.ArgumentParser, what: str, default: str | None
     required unless ``default`` says where it goes without one."""
     parser.add_argument("--out", type=out_dir, required=default is None, metavar="DIR",
                         help=what if default is None else f"{what} (default {default})")
+
+
+def add_progress_flag(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def add_wandb_flag(parser: argparse.ArgumentParser, what: str = "metrics") -> None:
+    parser.add_argument("--wandb", action="store_true",
+                        help=f"also log the {what} to W&B (offline unless WANDB_MODE is set)")
+
+
+def add_run_flags(parser: argparse.ArgumentParser, total: str) -> None:
+    """The flags of a trainer whose settings are a YAML config: ``--seed`` overrides the
+    config's, ``--resume`` continues the newest checkpoint in ``--out`` up to ``total`` (the
+    config field that ends the run), ``--wandb`` logs the curves."""
+    parser.add_argument("--seed", type=non_negative_int, help="override the config's seed")
+    parser.add_argument("--resume", action="store_true",
+                        help=f"continue from the newest checkpoint in --out up to the config's "
+                        f"{total}")
+    add_wandb_flag(parser, "training curves")
 
 
 def shard_range(text: str) -> tuple[int, int]:

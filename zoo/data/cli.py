@@ -11,7 +11,7 @@ from pathlib import Path
 
 from zoo.agents import AGENT_NAMES, AgentSpec
 from zoo.agents.spec import add_agent_flags
-from zoo.argtypes import add_out_flag, existing_dir, positive_int, shard_range
+from zoo.argtypes import add_out_flag, add_progress_flag, existing_dir, positive_int, shard_range
 from zoo.envs.flags import (
     REQUIRED, add_episodes_flag, add_game_flag, add_max_steps_flag, add_num_envs_flag,
     add_seed_flag,
@@ -145,7 +145,7 @@ def _add_play_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--shards", type=shard_range,
                         help="A:B: write only shards A..B-1 (one task of a job array; join the "
                         "folders with `zoo data merge`)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_progress_flag(parser)
 
 
 def _check_frames(args) -> None:

@@ -13,7 +13,8 @@ from pathlib import Path
 
 from zoo.agents import AgentSpec
 from zoo.agents.spec import add_agent_flags
-from zoo.argtypes import add_out_flag, existing_dir, non_negative_int, positive_int
+from zoo.argtypes import (add_out_flag, add_wandb_flag, existing_dir, non_negative_int,
+                          positive_int)
 from zoo.envs.flags import (
     add_episodes_flag, add_game_flag, add_max_steps_flag, add_num_envs_flag, add_seed_flag,
 )
@@ -77,10 +78,7 @@ def register(subparsers) -> None:
                        "task's: 500 single-step, 1000 T1-T4)")
     p.add_argument("--no-gif", action="store_true", help="skip episode.gif")
     p.add_argument("--overwrite", action="store_true", help="replace a report already in --out")
-    p.add_argument(
-        "--wandb", action="store_true",
-        help="also log the report, plot and GIF as a W&B run (offline unless WANDB_MODE is set)",
-    )
+    add_wandb_flag(p, "report, plot and GIF as a run")
     p.add_argument("--task", choices=sorted(TASKS), help="play this task and report its success")
     p.add_argument(
         "--instruction", metavar="TEXT",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from zoo.argtypes import add_out_flag
+from zoo.argtypes import add_out_flag, add_run_flags
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -27,15 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument(
         "--total-timesteps", type=lambda s: int(float(s)), help="override total_timesteps (1e9 ok)"
     )
-    train.add_argument("--seed", type=int, help="override seed")
-    train.add_argument(
-        "--resume",
-        action="store_true",
-        help="continue from the newest checkpoint in --out up to the config's total",
-    )
-    train.add_argument(
-        "--wandb", action="store_true", help="also log to W&B (offline unless WANDB_MODE is set)"
-    )
+    add_run_flags(train, "total_timesteps")
     train.set_defaults(handler=run_train)
 
 

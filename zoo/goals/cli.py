@@ -7,7 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from zoo.argtypes import add_out_flag, existing_dir, positive_int, shard_range
+from zoo.argtypes import add_out_flag, add_progress_flag, existing_dir, positive_int, shard_range
 
 
 def register(subparsers) -> None:
@@ -66,7 +66,7 @@ def _register_prior_pairs(goals_sub) -> None:
     pairs.add_argument("--seed", type=int, default=0, help="seed of --max-pairs, --paraphrases")
     pairs.add_argument("--batch-size", type=positive_int, default=64, help="clips per C-CLIP pass")
     pairs.add_argument("--device", default="cpu")
-    pairs.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_progress_flag(pairs)
     pairs.set_defaults(handler=_prior_pairs)
 
 
@@ -96,7 +96,7 @@ def _register_embed(goals_sub) -> None:
                        help="frames per image-tower pass (whole groups of 6)")
     embed.add_argument("--device", default="cpu")
     embed.add_argument("--shards", type=shard_range, help="A:B: only CrafterPlay shards A..B-1")
-    embed.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_progress_flag(embed)
     embed.set_defaults(handler=_embed)
 
 

@@ -8,7 +8,7 @@ import json
 import sys
 from pathlib import Path
 
-from zoo.argtypes import add_out_flag
+from zoo.argtypes import add_out_flag, add_progress_flag, add_run_flags
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -27,13 +27,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     train.add_argument("--config", required=True, help="YAML with every RLConfig field")
     add_out_flag(train, "run folder", default="runs/rl/<config name>/seed<S>")
-    train.add_argument("--seed", type=int, help="override seed")
     train.add_argument(
         "--total-env-steps", type=lambda s: int(float(s)), help="override total_env_steps"
     )
-    train.add_argument("--resume", action="store_true", help="continue the newest checkpoint")
-    train.add_argument("--wandb", action="store_true", help="also log to W&B (offline default)")
-    train.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_run_flags(train, "total_env_steps")
+    add_progress_flag(train)
     train.set_defaults(handler=run_train)
     plot = verbs.add_parser(
         "plot",
