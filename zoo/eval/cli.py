@@ -29,7 +29,9 @@ Score and normalized Return as mean ± std over 5 chunks of the episodes (100 ep
 Writes OUT/report.json (also how episodes ended: survived, lava, zombie, arrow, a need at 0),
 OUT/stats.jsonl (crafter's Recorder format), OUT/achievements.png and OUT/episode.gif. Episode j is seeded from (--seed, j), so --num-envs changes speed, not results.
 Frames are rendered when the agent reads pixels or a GIF is wanted; a state-only expert with
---no-gif skips rendering, which plays several times faster.
+--no-gif skips rendering, which plays several times faster. Several evaluations at once on a
+few cores: export OMP_WAIT_POLICY=PASSIVE, or torch's spinning threads starve each other
+(docs/results/benchmarks.md).
 
 With --task NAME it plays a task instead (docs/tasks.md) and writes OUT/report.json and
 OUT/report.md: success rate with a Wilson 95% interval, median steps to success, sub-task
