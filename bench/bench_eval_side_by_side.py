@@ -24,6 +24,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench_cvpt import machine
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results" / "eval_side_by_side.json"
 
@@ -76,7 +78,7 @@ def main() -> None:
     results = {
         "method": __doc__.split("How: ")[1].strip(),
         "command": eval_command(args, args.seed, Path("OUT"))[2:],
-        "cpus": os.cpu_count(), "load_avg_1m_after": os.getloadavg()[0],
+        "machine": machine(),
         "wall_s": times, "median_wall_s": medians,
         "pair_slowdown_default": medians["pair_default"] / medians["alone_default"],
         "pair_slowdown_passive": medians["pair_passive"] / medians["alone_passive"],

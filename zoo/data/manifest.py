@@ -72,14 +72,15 @@ def load_manifest(root: str | Path) -> dict | None:
 def _upgrade_from_version_1(manifest: dict) -> None:
     """Read a version-1 manifest as version 2 writes it. Its shards are the same bytes; its
     ``config`` spelled three defaults as null (frames "stored", start_states "default",
-    expert_options {}) and may lack the fields added during version 1 (instructions,
+    expert_options {}) and may lack the fields added during version 1 (dagger, instructions,
     start_states). A resumed generation saves it back as version 2."""
     config = manifest.get("config", {})
     defaults = {"frames": "stored", "start_states": "default", "expert_options": {}}
     for key, value in defaults.items():
         if config.get(key) is None:
             config[key] = value
-    config.setdefault("instructions", None)
+    for key in ("dagger", "instructions"):
+        config.setdefault(key, None)
     manifest["format_version"] = FORMAT_VERSION
 
 

@@ -9,6 +9,8 @@ import json
 
 import pytest
 
+from zoo.agents import dataset_agent
+from zoo.data.generate import generate
 from zoo.data.manifest import DatasetMismatchError, check_same_config, config_diff, load_manifest
 from zoo.data.shard_generator import DaggerSettings, GenerationConfig
 
@@ -76,6 +78,27 @@ def test_a_version_1_manifest_reads_with_this_versions_spellings(tmp_path) -> No
     assert manifest["config"]["expert_options"] == {}
     assert config_diff(manifest["config"], dataclasses.asdict(EXPERT)) == ""
     check_same_config(manifest, dataclasses.asdict(EXPERT), tmp_path)  # resumes: no error
+
+
+def test_a_version_1_folder_resumes_to_the_same_shards_and_is_saved_as_version_2(tmp_path):
+    """A half-written folder of version 1 (its first shard, its config in version 1's nulls and
+    without the later fields) is finished by a rerun: the same bytes as one uninterrupted run."""
+    config = dataclasses.replace(EXPERT, episodes=2, episodes_per_shard=1)
+    whole, part = tmp_path / "whole", tmp_path / "part"
+    generate(config, whole, progress=False, build_agent=dataset_agent)
+    generate(config, part, progress=False, build_agent=dataset_agent, shards=(0, 1))
+    manifest = json.loads((part / "manifest.json").read_text())
+    manifest["format_version"] = 1
+    for key in ("frames", "expert_options"):
+        manifest["config"][key] = None
+    for key in ("dagger", "instructions", "start_states"):
+        del manifest["config"][key]
+    (part / "manifest.json").write_text(json.dumps(manifest))
+    generate(config, part, progress=False, build_agent=dataset_agent)
+    saved = json.loads((part / "manifest.json").read_text())
+    assert saved["format_version"] == 2 and saved["config"] == dataclasses.asdict(config)
+    assert [e["sha256"] for e in saved["shards"]] == [
+        e["sha256"] for e in load_manifest(whole)["shards"]]
 
 
 def test_a_manifest_of_an_unknown_version_is_refused_by_name(tmp_path) -> None:
