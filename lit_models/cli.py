@@ -17,6 +17,7 @@ import warnings
 from pathlib import Path
 
 import lightning as L
+import torch
 import yaml
 from jsonargparse import Namespace
 from lightning.pytorch.cli import LightningCLI, SaveConfigCallback
@@ -25,6 +26,7 @@ from lightning.pytorch.loggers import WandbLogger
 from lit_models.prediction_writer import NpzPredictionWriter
 from zoo.data.manifest import MissingDatasetError
 from zoo.data.storage import is_url
+from zoo.weights.checkpoint_io import CheckpointError
 
 
 class WandbSaveConfigCallback(SaveConfigCallback):
@@ -37,6 +39,28 @@ class WandbSaveConfigCallback(SaveConfigCallback):
         for logger in trainer.loggers:
             if isinstance(logger, WandbLogger):
                 logger.log_hyperparams({"config": config})
+
+
+RETIRED_HPARAMS: dict[str, object] = {"update_every": "window", "activation_checkpointing": False}
+"""Model arguments this version removed, each with the one value whose behaviour it still has."""
+
+
+def without_retired(hparams: dict, ckpt_path: str) -> dict:
+    """A checkpoint's hyperparameters minus the retired ones, so a run saved before their
+    removal resumes; one saved with behaviour the code no longer has is refused by name."""
+    kept = dict(hparams)
+    for key, value in RETIRED_HPARAMS.items():
+        if key not in kept:
+            continue
+        if kept[key] != value:
+            raise CheckpointError(
+                f"{ckpt_path} was trained with model.init_args.{key}={kept[key]!r}, which this "
+                f"version removed (only {value!r} remains; CHANGELOG.md, 'Removed'): resume it "
+                "with crafter-zoo 0.1.0, or start a new run from its weights with "
+                "--model.init_args.init_weights"
+            )
+        del kept[key]
+    return kept
 
 
 _RUN_DIRS_GIVEN: set[Path] = set()
@@ -106,6 +130,23 @@ class ZooCLI(LightningCLI):
         subcommand = self.config.get("subcommand")
         if subcommand:  # a run, not a test building the CLI from a config's placeholders
             check_data_paths(self.config[subcommand].data)
+
+    def _parse_ckpt_path(self) -> None:
+        """Lightning's merge of a ``--ckpt_path`` checkpoint's hyperparameters into the model
+        config (they win over the config's), after dropping the retired ones: Lightning's own
+        merge fails on any argument the module no longer takes."""
+        subcommand = self.config.get("subcommand")
+        ckpt_path = self.config[subcommand].get("ckpt_path") if subcommand else None
+        if not ckpt_path or is_url(ckpt_path) or not Path(ckpt_path).is_file():
+            return
+        saved = torch.load(ckpt_path, weights_only=True, map_location="cpu")
+        hparams = without_retired(saved.get("hyper_parameters", {}), ckpt_path)
+        hparams.pop("_instantiator", None)
+        if not hparams:
+            return
+        if "_class_path" in hparams:
+            hparams = {"class_path": hparams.pop("_class_path"), "dict_kwargs": hparams}
+        self.config = self.parser.parse_object({subcommand: {"model": hparams}}, self.config)
 
     def before_instantiate_classes(self) -> None:
         config = self.config[self.subcommand] if self.subcommand else self.config

@@ -84,6 +84,28 @@ def test_fit_writes_run_folder_and_resumes_at_the_same_step(
     assert len([p for p in tmp_path.iterdir() if p.name != "export"]) == 2  # resumed run: own folder
 
 
+def test_a_checkpoint_with_retired_arguments_resumes_and_other_behaviour_is_refused(
+    crafterplay: Path, tmp_path: Path
+) -> None:
+    """Checkpoints saved before ``update_every``/``activation_checkpointing`` were removed hold
+    them in their hyperparameters, which Lightning merges into the config of a resume."""
+    from zoo.weights.checkpoint_io import CheckpointError
+
+    _fit(crafterplay, tmp_path / "first", 2)
+    (run_dir,) = (tmp_path / "first").iterdir()
+    saved = torch.load(run_dir / "checkpoints" / "last.ckpt", weights_only=True)
+    saved["hyper_parameters"] |= {"update_every": "window", "activation_checkpointing": False}
+    old = tmp_path / "saved_before_the_removal.ckpt"
+    torch.save(saved, old)
+    resumed = _fit(crafterplay, tmp_path / "resumed", 3, f"--ckpt_path={old}")
+    assert resumed.trainer.global_step == 3
+
+    saved["hyper_parameters"]["update_every"] = "batch"  # a behaviour this version lacks
+    torch.save(saved, old)
+    with pytest.raises(CheckpointError, match=r"update_every='batch'.*crafter-zoo 0\.1\.0"):
+        _fit(crafterplay, tmp_path / "refused", 3, f"--ckpt_path={old}")
+
+
 def test_last_checkpoint_is_the_newest_not_the_best(crafterplay: Path, tmp_path: Path) -> None:
     # Three validations (every 2 steps); whichever is best, last.ckpt must hold step 6, or a
     # resume would silently redo the steps after the best one.
