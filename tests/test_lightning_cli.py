@@ -97,8 +97,10 @@ def test_a_checkpoint_with_retired_arguments_resumes_and_other_behaviour_is_refu
     saved["hyper_parameters"] |= {"update_every": "window", "activation_checkpointing": False}
     old = tmp_path / "saved_before_the_removal.ckpt"
     torch.save(saved, old)
-    resumed = _fit(crafterplay, tmp_path / "resumed", 3, f"--ckpt_path={old}")
+    resumed = _fit(crafterplay, tmp_path / "resumed", 3, f"--ckpt_path={old}", "--model.init_args.lr=0.123")
     assert resumed.trainer.global_step == 3
+    # a resume is the same run: the checkpoint's model arguments win over the command line's
+    assert resumed.model.hparams.lr == saved["hyper_parameters"]["lr"] != 0.123
 
     saved["hyper_parameters"]["update_every"] = "batch"  # a behaviour this version lacks
     torch.save(saved, old)
