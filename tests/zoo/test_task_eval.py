@@ -40,9 +40,10 @@ def test_wilson_interval_rejects_impossible_counts():
             wilson_interval(successes, n)
 
 
-def _episode(i: int, steps: list[int | None]) -> TaskEpisode:
+def _episode(i: int, steps: list[int | None], end: str = "zombie") -> TaskEpisode:
     success = all(s is not None for s in steps)
-    return TaskEpisode(i, i, success, steps[-1] if success else None, steps, 100)
+    return TaskEpisode(i, i, success, steps[-1] if success else None, steps, 100,
+                       "success" if success else end)
 
 
 def test_compare_success_counts_ahead_and_separated_tasks():
@@ -82,6 +83,21 @@ def test_summary_and_report(tmp_path):
         summarize_task([], [])
 
 
+def test_the_report_says_how_failures_ended(tmp_path):
+    """Shares are of the failures (3 of 4 episodes here), every cause listed; a success is
+    not a cause."""
+    results = [_episode(0, [3, 10]), _episode(1, [5, None], "needs"),
+               _episode(2, [None, None], "needs"), _episode(3, [4, None], "survived")]
+    meta = {"task": "T2", "env": "crafter", "agent": "x", "instruction_mode": "m",
+            "instructions": list(TASKS["T2"].instructions)}
+    report = write_task_report(results, [], tmp_path, meta)
+    assert report["failure_end_percent"] == pytest.approx(
+        {"survived": 100 / 3, "lava": 0, "zombie": 0, "arrow": 0, "needs": 200 / 3, "other": 0})
+    assert "Failures ended by: survived 33%, needs 67% (survived: the step limit)." in (
+        tmp_path / "report.md").read_text()
+    assert summarize_task(results[:1], meta["instructions"])["failure_end_percent"] == {}
+
+
 def _expert_success(task: str, game: str, episodes: int, num_envs: int = 4) -> list[TaskEpisode]:
     env = make_task_env(task, game, num_envs, pixels=False)
     results, _ = evaluate_task(
@@ -97,6 +113,7 @@ def test_goal_directed_expert_solves_tasks_quickly(task):
     assert all(r.success for r in results)
     for r in results:
         assert r.steps_to_success == r.length == r.subtask_steps[-1]  # success ends the episode
+        assert r.end == "success"
         assert r.subtask_steps == sorted(r.subtask_steps)
 
 

@@ -20,6 +20,7 @@ import numpy as np
 from zoo.agents.base import Agent, InstructableAgent
 from zoo.envs.base import Step
 from zoo.envs.tasks import TaskEnv
+from zoo.eval.death import death_shares
 from zoo.eval.plots import write_gif
 from zoo.eval.rollout import EpisodeResult, evaluate
 from zoo.eval.stats import disjoint_above, two_proportion_p
@@ -47,6 +48,9 @@ class TaskEpisode:
     steps_to_success: int | None
     subtask_steps: list[int | None]
     length: int
+    end: str
+    """Why it ended: "success", or for a failure ``zoo.eval.death``'s cause ("survived" is the
+    step limit)."""
 
 
 class SubtaskInstructor:
@@ -124,6 +128,7 @@ def evaluate_task(
                 steps_to_success=steps[-1] if success else None,
                 subtask_steps=steps,
                 length=result.length,
+                end="success" if success else result.death,
             )
         )
 
@@ -152,6 +157,7 @@ def summarize_task(results: list[TaskEpisode], subtasks: list[str]) -> dict:
                 "median_step": float(np.median(done)) if done else None,
             }
         )
+    failures = [r.end for r in results if not r.success]
     return {
         "episodes": n,
         "successes": wins,
@@ -159,6 +165,8 @@ def summarize_task(results: list[TaskEpisode], subtasks: list[str]) -> dict:
         "wilson95_percent": [100.0 * low, 100.0 * high],
         "median_steps_to_success": float(np.median(steps)) if steps else None,
         "subtasks": per_sub,
+        # a long task is often lost to a death on the way: which one says what to fix
+        "failure_end_percent": death_shares(failures) if failures else {},
     }
 
 
@@ -213,6 +221,10 @@ def format_task_table(report: dict) -> str:
             f"| {k}. {sub['instruction']} | {sub['completed_percent']:.1f} | |"
             f" {'-' if step is None else f'{step:.0f}'} |"
         )
+    ends = {cause: share for cause, share in report.get("failure_end_percent", {}).items() if share}
+    if ends:
+        text = ", ".join(f"{cause} {share:.0f}%" for cause, share in ends.items())
+        lines += ["", f"Failures ended by: {text} (survived: the step limit)."]
     return "\n".join(lines)
 
 
