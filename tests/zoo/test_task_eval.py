@@ -123,6 +123,21 @@ def test_results_do_not_depend_on_the_batch_size():
     assert one == three
 
 
+def test_a_failed_episode_carries_how_it_ended():
+    """Random play fails T4; each failure's end is the rollout's death cause, the step limit
+    ("survived") included, and the summary counts them."""
+    from zoo.agents.base import RandomAgent
+    from zoo.eval.death import DEATH_CAUSES
+
+    env = make_task_env("T4", "crafter", 2, pixels=False, max_steps=60)
+    results, rollouts = evaluate_task(RandomAgent(2), env, 2, seed=0, progress=False)
+    assert not any(r.success for r in results)
+    assert [r.end for r in results] == [r.death for r in rollouts] and set(
+        r.end for r in results) <= set(DEATH_CAUSES)
+    shares = summarize_task(results, list(TASKS["T4"].instructions))["failure_end_percent"]
+    assert sum(shares.values()) == pytest.approx(100)
+
+
 def test_instructions_need_an_instructable_agent():
     from zoo.agents.base import RandomAgent
 

@@ -35,7 +35,7 @@ few cores: export OMP_WAIT_POLICY=PASSIVE, or torch's spinning threads starve ea
 
 With --task NAME it plays a task instead (docs/tasks.md) and writes OUT/report.json and
 OUT/report.md: success rate with a Wilson 95% interval, median steps to success, sub-task
-completion. An instructable agent gets --instruction after every reset, or with --chain the
+completion, and how the failed episodes ended. An instructable agent gets --instruction after every reset, or with --chain the
 heuristic planner's instructions; with neither, each sub-task's own caption in turn.
 
 Many such reports under one OUT with a summary (C-Steve-1's task table, CFG sweep and goal
