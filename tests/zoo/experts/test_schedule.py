@@ -3,6 +3,8 @@ drawn from the episode's seed; and the schedule's captions and ids."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -24,6 +26,7 @@ from zoo.experts.scripted.schedule import (
     tally_outcomes,
 )
 
+ROOT = Path(__file__).resolve().parents[3]
 WOOD, TABLE = "obtain wood", "place table on grass"
 
 
@@ -101,6 +104,20 @@ def test_a_caption_file_can_weight_its_captions(tmp_path) -> None:
         instruction_schedule(str(path), 9)
     with pytest.raises(ValueError, match="one weight > 0 per caption"):
         InstructionSchedule((WOOD, TABLE), (0, 13), 5, (1.0, 0.0))
+
+
+def test_the_shipped_caption_files_are_schedules_the_expert_follows() -> None:
+    """configs/instructions is what `zoo data generate --instructions FILE` is given: each file
+    must load, and the weighted one must weight coal and drink alone."""
+    files = sorted((ROOT / "configs" / "instructions").glob("*.txt"))
+    assert files, "no caption files under configs/instructions"
+    schedules = {f.stem: instruction_schedule(str(f), 200) for f in files}
+    uniform = schedules["captions_no_ripe_plant"]
+    weighted = schedules["captions_coal_drink_x3"]
+    assert uniform.weights is None and weighted.captions == uniform.captions
+    assert {c: w for c, w in zip(weighted.captions, weighted.weights) if w != 1.0} == {
+        "obtain coal": 3.0, "obtain drink": 3.0,
+    }
 
 
 @pytest.mark.parametrize("captions, ids, timeout, message", [
