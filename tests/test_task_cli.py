@@ -28,6 +28,10 @@ def test_chain_and_single_instruction(tmp_path, capsys):
     assert main(task_args(tmp_path / "chain", "--chain", task="T4")) == 0
     report = json.loads((tmp_path / "chain" / "report.json").read_text())
     assert report["instruction_mode"] == "chained instructions" and report["successes"] >= 1
+    assert report["chain_config"]["coal_via_stone"] is True  # the report says which planner
+    assert main(task_args(tmp_path / "direct", "--chain", "--chain-coal-direct", task="T4")) == 0
+    report = json.loads((tmp_path / "direct" / "report.json").read_text())
+    assert report["chain_config"]["coal_via_stone"] is False
     args = task_args(tmp_path / "one", "--instruction", "obtain sapling", task="collect_sapling")
     assert main(args) == 0
     report = json.loads((tmp_path / "one" / "report.json").read_text())
@@ -50,6 +54,7 @@ def test_random_agent_plays_a_task_without_instructions(tmp_path):
             "--instruction: the scripted expert cannot follow ['fly to the moon']; known",
         ),
         (["--instruction", "obtain wood", "--chain"], "give --instruction or --chain, not both"),
+        (["--chain-coal-direct"], "--chain-coal-direct changes the --chain planner; give --chain"),
     ],
 )
 def test_bad_instruction_arguments(tmp_path, capsys, args, message):

@@ -122,18 +122,33 @@ def test_t4_chain_gathers_wood_for_both_pickaxes_and_a_new_table_when_far():
         .then(wood=3)
         .then(wood=4)  # a table and two pickaxes
         .then(wood=2, tiles=[((11, 10), Block.TABLE)])
-        .then(wood=1, wood_pickaxe=1)
-        .then(pos=(40, 40))  # walks off to the coal
+        .then(wood=1, wood_pickaxe=1)  # no coal in view: dig through stone for it
+        .then(pos=(40, 40), stone=2)  # walks off into the stone
+        .then(tiles=[((42, 43), Block.COAL)])  # coal in view
         .then(coal=1)  # the table is out of sight: wood for a new one and the pickaxe
         .then(wood=3)
         .then(wood=1, tiles=[((41, 40), Block.TABLE)])
         .then(wood=0, wood_pickaxe=2)
-        .then(stone=1)
+        .then(stone=3)
     )
     assert _told("T4", script) == [
-        "obtain wood", "place table on grass", "craft wood pickaxe", "obtain coal",
-        "obtain wood", "place table on grass", "craft wood pickaxe", "obtain stone", None,
+        "obtain wood", "place table on grass", "craft wood pickaxe", "obtain stone",
+        "obtain coal", "obtain wood", "place table on grass", "craft wood pickaxe",
+        "obtain stone", None,
     ]
+
+
+@pytest.mark.parametrize(
+    ("coal", "via_stone", "told"),
+    [((13, 14), True, "obtain coal"), ((14, 10), True, "obtain stone"),
+     ((10, 15), True, "obtain stone"), ((14, 10), False, "obtain coal")],
+)
+def test_coal_is_asked_for_once_it_is_in_the_local_view(coal, via_stone, told):
+    """Until coal is seen the planner says "obtain stone" (coal lies in stone); off, the old
+    plan says "obtain coal" at once."""
+    state = Script().then(wood_pickaxe=1, tiles=[(coal, Block.COAL)]).states[-1]  # at (10, 10)
+    config = ChainConfig(coal_via_stone=via_stone)
+    assert plan_instruction(TASKS["T4"], 0, state, 0, config) == told
 
 
 def test_chain_instructs_only_on_change_and_again_after_reset():

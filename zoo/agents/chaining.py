@@ -6,8 +6,13 @@ expert) one caption at a time. Each sub-task expands into the captions that get 
 the current state, e.g. T4 from an empty inventory: obtain wood (until enough for a table and
 both pickaxes), place table on grass, craft wood pickaxe, obtain coal, (obtain wood, place
 table if none is near), craft wood pickaxe, obtain stone. Only what an agent could see is
-used: a table is near, and a plant is seen, only inside the local view (9 columns by 7 rows
-around the player in both games; ``ChainConfig.view_cols`` / ``view_rows``).
+used: a table is near, and a plant or coal is seen, only inside the local view (9 columns by
+7 rows around the player in both games; ``ChainConfig.view_cols`` / ``view_rows``).
+
+Coal is searched for through stone (``ChainConfig.coal_via_stone``), the block it lies in:
+until coal is in view the planner says "obtain stone", then "obtain coal". C-Steve-1 reaches
+coal about as often either way, but more of its episodes go on to finish T4
+(docs/results/notes/csteve1.md, "Coal through stone").
 """
 
 from __future__ import annotations
@@ -63,6 +68,9 @@ class ChainConfig:
     """Map rows the agent sees above and below itself (the local view is 7 rows tall)."""
     view_cols: int = VIEW[1] // 2
     """Map columns the agent sees left and right of itself (the local view is 9 wide)."""
+    coal_via_stone: bool = True
+    """Say "obtain stone" until coal is in view, then "obtain coal" (False: "obtain coal" from
+    the start, the planner before 2026-12-08)."""
 
 
 def _local_view(state: State, i: int, config: ChainConfig) -> np.ndarray:
@@ -112,7 +120,11 @@ def plan_instruction(
             return craft(Item.WOOD_PICKAXE, True) if inv[Item.WOOD_PICKAXE] < 1 else "obtain stone"
         return craft(STONE_TOOLS[ach])
     if ach in MINE:
-        return craft(Item.WOOD_PICKAXE, True) if inv[Item.WOOD_PICKAXE] < 1 else MINE[ach]
+        if inv[Item.WOOD_PICKAXE] < 1:
+            return craft(Item.WOOD_PICKAXE, True)
+        if ach == Ach.COLLECT_COAL and config.coal_via_stone and not (view == Block.COAL).any():
+            return MINE[Ach.COLLECT_STONE]
+        return MINE[ach]
     check_plannable(task)
     raise AssertionError(f"{ach!r} is in PLANNED but has no plan")
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import asdict
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -89,6 +90,11 @@ def register(subparsers) -> None:
     p.add_argument(
         "--chain", action="store_true",
         help="with --task: the heuristic planner chains instructions to the agent",
+    )
+    p.add_argument(
+        "--chain-coal-direct", action="store_true",
+        help="with --chain: say 'obtain coal' from the start (the planner before 2026-12-08), "
+        "not 'obtain stone' until coal is in view",
     )
     p.set_defaults(handler=run_eval)
     tables = subparsers.add_parser(
@@ -204,11 +210,14 @@ def _build_agent(args: argparse.Namespace, num_envs: int):
 
 def _check_task_args(args: argparse.Namespace) -> None:
     if args.task is None:
-        for flag, value in (("--instruction", args.instruction), ("--chain", args.chain)):
+        for flag, value in (("--instruction", args.instruction), ("--chain", args.chain),
+                            ("--chain-coal-direct", args.chain_coal_direct)):
             if value:
                 raise UsageError(f"{flag} needs --task NAME (one of {', '.join(sorted(TASKS))})")
     if args.instruction is not None and args.chain:
         raise UsageError("give --instruction or --chain, not both")
+    if args.chain_coal_direct and not args.chain:
+        raise UsageError("--chain-coal-direct changes the --chain planner; give --chain too")
 
 
 def run_eval(args: argparse.Namespace) -> int:
@@ -280,6 +289,7 @@ def run_task_eval(
     if (args.instruction is not None or args.chain) and not instructable:
         who = args.agent or args.checkpoint
         raise UsageError(f"agent {who} does not follow instructions (no instruct method)")
+    planner: dict = {}  # the chaining planner's settings, recorded in the report
     if args.instruction is not None:
         mode = f"instruction {args.instruction!r}"
         try:  # an unknown text fails here, before any env is built
@@ -293,9 +303,11 @@ def run_task_eval(
             if note:
                 print(f"zoo eval: note: {note}", file=sys.stderr)
     elif args.chain:
-        from zoo.agents.chaining import ChainingAgent
+        from zoo.agents.chaining import ChainConfig, ChainingAgent
 
-        agent, mode = ChainingAgent(agent, task), "chained instructions"
+        chain = ChainConfig(coal_via_stone=not args.chain_coal_direct)
+        agent, mode = ChainingAgent(agent, task, chain), "chained instructions"
+        planner = {"chain_config": asdict(chain)}
     else:
         mode = "sub-task instructions" if instructable else "no instruction"
     clock = time.perf_counter()
@@ -311,6 +323,7 @@ def run_task_eval(
         "task": task.name,
         "instructions": list(task.instructions),
         "instruction_mode": mode,
+        **planner,
         "env": args.env,
         "agent": args.agent or getattr(agent, "name", "checkpoint"),
         "checkpoint": None if args.checkpoint is None else str(args.checkpoint),
