@@ -4,15 +4,16 @@ The paper's heuristic planner (Instruction-Chaining, Table 5): it watches each e
 inventory, map and task progress and hands the low-level agent (C-Steve-1, or the scripted
 expert) one caption at a time. Each sub-task expands into the captions that get it done from
 the current state, e.g. T4 from an empty inventory: obtain wood (until enough for a table and
-both pickaxes), place table on grass, craft wood pickaxe, obtain coal, (obtain wood, place
-table if none is near), craft wood pickaxe, obtain stone. Only what an agent could see is
-used: a table is near, and a plant or coal is seen, only inside the local view (9 columns by
-7 rows around the player in both games; ``ChainConfig.view_cols`` / ``view_rows``).
+both pickaxes), place table on grass, craft wood pickaxe, obtain stone (until coal is in view),
+obtain coal, (obtain wood, place table if none is near), craft wood pickaxe, obtain stone.
+Only what an agent could see is used: a table is near, and a plant or coal is seen, only
+inside the local view (9 columns by 7 rows around the player in both games;
+``ChainConfig.view_cols`` / ``view_rows``).
 
 Coal is searched for through stone (``ChainConfig.coal_via_stone``), the block it lies in:
 until coal is in view the planner says "obtain stone", then "obtain coal". C-Steve-1 reaches
 coal about as often either way, but more of its episodes go on to finish T4
-(docs/results/notes/csteve1.md, "Coal through stone").
+(docs/results/notes/csteve1.md, "Coal through stone, and leg 2 shipped").
 """
 
 from __future__ import annotations
