@@ -11,9 +11,10 @@ inside the local view (9 columns by 7 rows around the player in both games;
 ``ChainConfig.view_cols`` / ``view_rows``).
 
 Coal is searched for through stone (``ChainConfig.coal_via_stone``), the block it lies in:
-until coal is in view the planner says "obtain stone", then "obtain coal". C-Steve-1 reaches
-coal about as often either way, but more of its episodes go on to finish T4
-(docs/results/notes/csteve1.md, "Coal through stone, and leg 2 shipped").
+until coal is in view the planner says "obtain stone", then "obtain coal". The C-Steve-1
+shipped on 2026-12-08 reaches coal about as often either way, but more of its episodes go on
+to finish T4; the export before it gains little (docs/results/notes/csteve1.md, "Coal
+through stone, and leg 2 shipped").
 """
 
 from __future__ import annotations
